@@ -1,0 +1,147 @@
+"""``cameras.json``: the one camera file every stage reads (schema in DESIGN.md).
+
+OpenCV convention (x right, y down, z forward), camera-to-world 4x4, pinhole intrinsics; pixel (0, 0) is
+the top-left corner of the image, so the centre of the top-left pixel is (0.5, 0.5).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from .artifacts import read_json, write_json
+from .errors import InputError
+
+Matrix4 = list[list[float]]
+
+
+def _check_4x4(m: Matrix4 | None, *, rigid: bool) -> Matrix4 | None:
+    if m is None:
+        return None
+    a = np.asarray(m, dtype=np.float64)
+    if a.shape != (4, 4) or not np.all(np.isfinite(a)):
+        raise ValueError(f"expected a finite 4x4 matrix, got shape {a.shape}")
+    if not np.allclose(a[3], [0, 0, 0, 1], atol=1e-9):
+        raise ValueError("last row of a 4x4 transform must be [0, 0, 0, 1]")
+    r = a[:3, :3]
+    scale = np.cbrt(np.linalg.det(r))
+    if scale <= 0:
+        raise ValueError("transform is a reflection or degenerate (det <= 0)")
+    tol = 1e-4
+    if not np.allclose(r.T @ r, scale**2 * np.eye(3), atol=tol * max(1.0, scale**2)):
+        raise ValueError("rotation part is not orthogonal")
+    if rigid and abs(scale - 1) > tol:
+        raise ValueError(f"camera_to_world must be rigid (scale 1), got scale {scale:.6f}")
+    return a.tolist()
+
+
+class Camera(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    name: str
+    image: str | None = None
+    width: int = Field(gt=0)
+    height: int = Field(gt=0)
+    fx: float = Field(gt=0)
+    fy: float = Field(gt=0)
+    cx: float
+    cy: float
+    camera_to_world: Matrix4
+
+    @field_validator("camera_to_world")
+    @classmethod
+    def _rigid(cls, v: Matrix4) -> Matrix4:
+        return _check_4x4(v, rigid=True)
+
+    @property
+    def K(self) -> np.ndarray:
+        """``(3, 3)`` intrinsic matrix."""
+        return np.array([[self.fx, 0, self.cx], [0, self.fy, self.cy], [0, 0, 1]], dtype=np.float64)
+
+    @property
+    def c2w(self) -> np.ndarray:
+        """``(4, 4)`` camera-to-world matrix."""
+        return np.asarray(self.camera_to_world, dtype=np.float64)
+
+    @property
+    def center(self) -> np.ndarray:
+        """``(3,)`` camera centre in world coordinates."""
+        return self.c2w[:3, 3].copy()
+
+
+class Frame(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    convention: str = "opencv"
+    to_colmap: Matrix4 | None = None
+
+    @field_validator("convention")
+    @classmethod
+    def _opencv(cls, v: str) -> str:
+        if v != "opencv":
+            raise ValueError(f"only the 'opencv' convention is supported, got {v!r}")
+        return v
+
+    @field_validator("to_colmap")
+    @classmethod
+    def _similarity(cls, v: Matrix4 | None) -> Matrix4 | None:
+        return _check_4x4(v, rigid=False)
+
+
+class CameraSet(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    frame: Frame = Field(default_factory=Frame)
+    cameras: list[Camera]
+
+    def __len__(self) -> int:
+        return len(self.cameras)
+
+    def by_name(self) -> dict[str, Camera]:
+        return {c.name: c for c in self.cameras}
+
+    def K(self) -> np.ndarray:
+        """``(N, 3, 3)`` intrinsics."""
+        return np.stack([c.K for c in self.cameras])
+
+    def c2w(self) -> np.ndarray:
+        """``(N, 4, 4)`` camera-to-world matrices."""
+        return np.stack([c.c2w for c in self.cameras])
+
+
+def load_cameras(path: str | Path) -> CameraSet:
+    """Read and validate a ``cameras.json``; errors name the file."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("camera file not found", path, "run the poses stage or pass an existing cameras.json")
+    try:
+        return CameraSet.model_validate(read_json(path))
+    except ValueError as e:
+        raise InputError(f"invalid cameras.json: {e}", path) from e
+
+
+def save_cameras(path: str | Path, cameras: CameraSet) -> Path:
+    return write_json(path, cameras.model_dump(mode="json"))
+
+
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = np.array([0.0, 0.0, 1.0])) -> np.ndarray:
+    """``(4, 4)`` OpenCV camera-to-world looking from ``eye`` at ``target`` (image up ~ ``up``)."""
+    eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
+    z = target - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(z, up)
+    if np.linalg.norm(x) < 1e-9:  # looking along `up`: any perpendicular will do
+        x = np.cross(z, np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0]))
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = x, y, z, eye
+    return m
+
+
+def intrinsics_from_fov(width: int, height: int, fov_x_deg: float) -> tuple[float, float, float, float]:
+    """(fx, fy, cx, cy) of a centred pinhole with horizontal field of view ``fov_x_deg``, square pixels."""
+    fx = 0.5 * width / np.tan(np.deg2rad(fov_x_deg) / 2)
+    return float(fx), float(fx), width / 2.0, height / 2.0

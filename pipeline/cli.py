@@ -1,0 +1,58 @@
+"""The ``orca`` command: one subcommand per stage, each a thin wrapper over that stage's function.
+
+Stage modules expose ``register(subparsers)``; heavy imports (mitsuba, torch, pycolmap) stay inside the
+stage functions so ``orca --help`` is instant.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+
+from . import __version__
+from .errors import OrcaError
+from .log import setup_logging
+
+# (subcommand, module defining register()) in DAG order.
+COMMANDS: list[tuple[str, str]] = [
+    ("synth", "pipeline.synth.cli"),
+    ("decode", "pipeline.stages.decode"),
+]
+
+log = logging.getLogger("orca")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="orca",
+        description="ORCa: glossy objects as radiance-field cameras. Each subcommand runs one stage of the "
+        "pipeline (the Snakefile runs them all); `orca <command> --help` shows its options and examples.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"orca {__version__}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    sub = parser.add_subparsers(dest="command", metavar="<command>", required=True)
+    for _, module in COMMANDS:
+        importlib.import_module(module).register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    setup_logging(verbose=args.verbose)
+    try:
+        args.func(args)
+    except OrcaError as e:
+        log.error("%s", e)
+        return 2
+    except KeyboardInterrupt:
+        log.error("interrupted; nothing half-written was left behind")
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
