@@ -1,0 +1,128 @@
+"""Input encodings: positional encoding (NeRF), integrated positional encoding (mip-NeRF), and a
+multiresolution hash grid (Instant-NGP) written in plain PyTorch so it runs on CPU and CUDA alike.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+from torch import nn
+
+
+def positional_encoding(x: torch.Tensor, num_freqs: int, include_input: bool = True) -> torch.Tensor:
+    """NeRF's frequency encoding.
+
+    Args:
+        x: ``(..., D)`` coordinates.
+        num_freqs: frequencies ``2^0 .. 2^(num_freqs-1)``.
+    Returns:
+        ``(..., D * (2 * num_freqs + include_input))``.
+    """
+    freqs = 2.0 ** torch.arange(num_freqs, dtype=x.dtype, device=x.device)
+    scaled = (x[..., None, :] * freqs[:, None]).flatten(-2)  # (..., F*D)
+    parts = [torch.sin(scaled), torch.cos(scaled)]
+    if include_input:
+        parts.insert(0, x)
+    return torch.cat(parts, dim=-1)
+
+
+def integrated_positional_encoding(
+    mean: torch.Tensor, var: torch.Tensor, min_deg: int, max_deg: int
+) -> torch.Tensor:
+    """mip-NeRF's IPE of Gaussians with diagonal covariance: E[sin], E[cos] of the frequency features.
+
+    High frequencies of a wide Gaussian are attenuated by ``exp(-0.5 * 4^l * var)``, which is what makes a
+    conical frustum far along a wide virtual cone blur instead of alias.
+
+    Args:
+        mean: ``(..., D)`` Gaussian means.
+        var: ``(..., D)`` per-axis variances.
+    Returns:
+        ``(..., 2 * D * (max_deg - min_deg))``.
+    """
+    scales = 2.0 ** torch.arange(min_deg, max_deg, dtype=mean.dtype, device=mean.device)  # (L,)
+    m = (mean[..., None, :] * scales[:, None]).flatten(-2)  # (..., L*D)
+    v = (var[..., None, :] * scales[:, None] ** 2).flatten(-2)
+    damp = torch.exp(-0.5 * v)
+    return torch.cat([damp * torch.sin(m), damp * torch.cos(m)], dim=-1)
+
+
+@dataclass(frozen=True)
+class HashGridSpec:
+    """Instant-NGP hash grid sizes. Defaults fit a CPU: ~0.5 M parameters."""
+
+    levels: int = 12
+    features_per_level: int = 2
+    log2_table_size: int = 15
+    base_resolution: int = 16
+    max_resolution: int = 512
+
+    @property
+    def out_dim(self) -> int:
+        return self.levels * self.features_per_level
+
+
+# Instant-NGP's spatial hash primes; the first is 1 so that x-neighbours stay close in memory.
+_PRIMES = (1, 2654435761, 805459861)
+
+# The 8 corners of a voxel as (8, 3) offsets.
+_CORNERS = torch.tensor([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], dtype=torch.long)
+
+
+class HashGrid(nn.Module):
+    """Multiresolution hash encoding of points in ``[0, 1]^3`` (trilinear interpolation per level).
+
+    Coarse levels whose dense grid fits in the table are indexed densely (no collisions); finer ones hash.
+    """
+
+    def __init__(self, spec: HashGridSpec = HashGridSpec()):
+        super().__init__()
+        self.spec = spec
+        table = 2**spec.log2_table_size
+        growth = math.exp((math.log(spec.max_resolution) - math.log(spec.base_resolution)) / max(spec.levels - 1, 1))
+        resolutions, sizes, dense = [], [], []
+        for level in range(spec.levels):
+            res = int(math.floor(spec.base_resolution * growth**level))
+            n_dense = (res + 1) ** 3
+            resolutions.append(res)
+            dense.append(n_dense <= table)
+            sizes.append(min(n_dense, table))
+        self.resolutions = resolutions
+        self.dense = dense
+        self.offsets = [0, *torch.tensor(sizes).cumsum(0).tolist()]
+        # Small uniform init as in Instant-NGP: the grid starts near zero and the MLP's prior dominates.
+        self.table = nn.Parameter(torch.empty(self.offsets[-1], spec.features_per_level).uniform_(-1e-4, 1e-4))
+        self.register_buffer("_corners", _CORNERS.clone(), persistent=False)
+        self.register_buffer("_primes", torch.tensor(_PRIMES, dtype=torch.long), persistent=False)
+
+    @property
+    def out_dim(self) -> int:
+        return self.spec.out_dim
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """Encode points.
+
+        Args:
+            x: ``(N, 3)`` in ``[0, 1]^3`` (values outside are clamped).
+        Returns:
+            ``(N, levels * features_per_level)``.
+        """
+        x = x.clamp(0.0, 1.0)
+        feats = []
+        for level, res in enumerate(self.resolutions):
+            pos = x * res
+            base = pos.floor().long().clamp(max=res - 1)  # (N, 3); res-1 keeps x == 1 inside the last voxel
+            frac = pos - base  # (N, 3)
+            corner = base[:, None, :] + self._corners  # (N, 8, 3)
+            if self.dense[level]:
+                idx = (corner[..., 0] * (res + 1) + corner[..., 1]) * (res + 1) + corner[..., 2]
+            else:
+                h = corner * self._primes
+                idx = (h[..., 0] ^ h[..., 1] ^ h[..., 2]) % (self.offsets[level + 1] - self.offsets[level])
+            values = self.table[idx + self.offsets[level]]  # (N, 8, F)
+            # trilinear weights: prod over axes of frac or (1 - frac) depending on the corner bit
+            w = torch.where(self._corners.bool(), frac[:, None, :], 1.0 - frac[:, None, :]).prod(-1)  # (N, 8)
+            feats.append((w[..., None] * values).sum(1))
+        return torch.cat(feats, dim=-1)
