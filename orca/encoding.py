@@ -101,11 +101,14 @@ class HashGrid(nn.Module):
     def out_dim(self) -> int:
         return self.spec.out_dim
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """Encode points.
+    def forward(self, x: torch.Tensor, scale: torch.Tensor | None = None) -> torch.Tensor:
+        """Encode points, optionally blurred to a footprint (Zip-NeRF's feature downweighting).
 
         Args:
             x: ``(N, 3)`` in ``[0, 1]^3`` (values outside are clamped).
+            scale: ``(N,)`` standard deviation of each point's footprint in the same units, or None. A level
+                whose cells are much smaller than the footprint would alias; its features are scaled by
+                ``erf(1 / sqrt(8 (scale * resolution)^2))``, which is ~1 for fine footprints and ~0 for wide.
         Returns:
             ``(N, levels * features_per_level)``.
         """
@@ -124,5 +127,8 @@ class HashGrid(nn.Module):
             values = self.table[idx + self.offsets[level]]  # (N, 8, F)
             # trilinear weights: prod over axes of frac or (1 - frac) depending on the corner bit
             w = torch.where(self._corners.bool(), frac[:, None, :], 1.0 - frac[:, None, :]).prod(-1)  # (N, 8)
-            feats.append((w[..., None] * values).sum(1))
+            level_feats = (w[..., None] * values).sum(1)
+            if scale is not None:
+                level_feats = level_feats * torch.erf(1.0 / torch.sqrt(8 * (scale * res).square() + 1e-12))[:, None]
+            feats.append(level_feats)
         return torch.cat(feats, dim=-1)

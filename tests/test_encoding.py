@@ -68,3 +68,17 @@ def test_hash_grid_levels_span_requested_resolutions():
     assert grid.resolutions[0] == 16 and abs(grid.resolutions[-1] - 1024) <= 1
     assert grid.dense[0] and not grid.dense[-1]
     assert math.isclose(grid.table.shape[0], grid.offsets[-1])
+
+
+def test_hash_grid_footprint_downweights_fine_levels_only():
+    grid = HashGrid(HashGridSpec(levels=5, base_resolution=4, max_resolution=256))
+    with torch.no_grad():
+        grid.table.normal_()
+    x = torch.rand(32, 3)
+    sharp = grid(x, scale=torch.full((32,), 1e-6))
+    torch.testing.assert_close(sharp, grid(x), atol=1e-6, rtol=0)
+    wide = grid(x, scale=torch.full((32,), 0.05)).reshape(32, 5, 2)
+    plain = grid(x).reshape(32, 5, 2)
+    ratio = (wide.norm(dim=(0, 2)) / plain.norm(dim=(0, 2)))
+    assert ratio[0] > 0.9 and ratio[-1] < 0.1, ratio  # 4-voxel level kept, 256-voxel level suppressed
+    assert (ratio[1:] <= ratio[:-1] + 1e-6).all()

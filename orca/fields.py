@@ -1,0 +1,156 @@
+"""The neural fields: the object's SDF with its diffuse-radiance head, and the environment radiance field.
+
+``SDFField``: points in the object's unit-sphere frame -> signed distance (positive outside) and features;
+the diffuse head maps features to view-independent linear radiance. It starts as a sphere: f(x) = |x| − r0
+plus a network whose output begins near zero, so normals and curvature are sensible from step one.
+
+``EnvironmentField``: conical frustums (Gaussians) in contracted space -> density and linear radiance,
+f_E(cone) of the paper; the 5D field queried along virtual cones from the object's surface.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from .encoding import HashGrid, HashGridSpec, integrated_positional_encoding, positional_encoding
+from .frustum import contract_gaussian
+
+Encoding = Literal["hashgrid", "frequency"]
+
+# Radius of the contracted space (mip-NeRF 360 maps all of R^3 into a ball of radius 2).
+_CONTRACTED_RADIUS = 2.0
+
+
+def mlp(in_dim: int, hidden: int, layers: int, out_dim: int) -> nn.Sequential:
+    """``layers`` hidden layers of width ``hidden`` with Softplus (smooth: the SDF is differentiated twice)."""
+    mods: list[nn.Module] = []
+    dim = in_dim
+    for _ in range(layers):
+        mods += [nn.Linear(dim, hidden), nn.Softplus(beta=100)]
+        dim = hidden
+    mods.append(nn.Linear(dim, out_dim))
+    return nn.Sequential(*mods)
+
+
+@dataclass(frozen=True)
+class SDFFieldSpec:
+    encoding: Encoding = "hashgrid"
+    hash_grid: HashGridSpec = field(default_factory=HashGridSpec)
+    num_freqs: int = 6  # frequency encoding (the paper's MLP)
+    hidden: int = 64
+    layers: int = 2
+    feature_dim: int = 15
+    diffuse_hidden: int = 64
+    diffuse_layers: int = 2
+    init_radius: float = 0.5  # the initial sphere, in the unit-sphere frame of the object
+    bound: float = 1.0  # the SDF is modelled inside [-bound, bound]^3
+
+
+class SDFField(nn.Module):
+    def __init__(self, spec: SDFFieldSpec = SDFFieldSpec()):
+        super().__init__()
+        self.spec = spec
+        if spec.encoding == "hashgrid":
+            self.grid: HashGrid | None = HashGrid(spec.hash_grid)
+            enc_dim = 3 + self.grid.out_dim
+        else:
+            self.grid = None
+            enc_dim = 3 * (2 * spec.num_freqs + 1)
+        self.net = mlp(enc_dim, spec.hidden, spec.layers, 1 + spec.feature_dim)
+        # The network starts as a near-zero correction to the analytic sphere.
+        with torch.no_grad():
+            self.net[-1].weight.mul_(1e-3)
+            self.net[-1].bias.zero_()
+        self.diffuse_net = mlp(spec.feature_dim + 3, spec.diffuse_hidden, spec.diffuse_layers, 3)
+
+    def encode(self, x: torch.Tensor) -> torch.Tensor:
+        """``(N, 3)`` -> ``(N, enc_dim)``."""
+        if self.grid is not None:
+            unit = (x / self.spec.bound + 1) * 0.5
+            return torch.cat([x, self.grid(unit)], dim=-1)
+        return positional_encoding(x, self.spec.num_freqs)
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """SDF and geometry features.
+
+        Args:
+            x: ``(N, 3)`` points.
+        Returns:
+            ``(N,)`` signed distances and ``(N, feature_dim)`` features.
+        """
+        out = self.net(self.encode(x))
+        sdf = x.norm(dim=-1) - self.spec.init_radius + out[:, 0]
+        return sdf, out[:, 1:]
+
+    def sdf(self, x: torch.Tensor) -> torch.Tensor:
+        """``(N, 3)`` -> ``(N,)``."""
+        return self.forward(x)[0]
+
+    def diffuse(self, x: torch.Tensor, features: torch.Tensor) -> torch.Tensor:
+        """View-independent linear diffuse radiance ``(N, 3)`` (non-negative, may exceed 1)."""
+        return F.softplus(self.diffuse_net(torch.cat([x, features], dim=-1)))
+
+
+@dataclass(frozen=True)
+class EnvironmentFieldSpec:
+    encoding: Literal["hashgrid", "ipe"] = "hashgrid"
+    hash_grid: HashGridSpec = field(
+        default_factory=lambda: HashGridSpec(levels=12, log2_table_size=17, base_resolution=16, max_resolution=1024)
+    )
+    ipe_max_deg: int = 12  # mip-NeRF's IPE (the paper's setting)
+    hidden: int = 64
+    layers: int = 2
+    dir_freqs: int = 2  # view dependence of the environment's radiance (0: none)
+    color_hidden: int = 64
+    density_bias: float = -1.0  # starts mostly empty so early cones see through to the walls
+
+
+class EnvironmentField(nn.Module):
+    """f_E: conical frustums -> (density, linear radiance), in the contracted space of the surroundings."""
+
+    def __init__(self, spec: EnvironmentFieldSpec = EnvironmentFieldSpec()):
+        super().__init__()
+        self.spec = spec
+        if spec.encoding == "hashgrid":
+            self.grid: HashGrid | None = HashGrid(spec.hash_grid)
+            enc_dim = self.grid.out_dim
+        else:
+            self.grid = None
+            enc_dim = 2 * 3 * spec.ipe_max_deg
+        self.trunk = mlp(enc_dim, spec.hidden, spec.layers, 1 + spec.hidden)
+        dir_dim = 3 * (2 * spec.dir_freqs + 1) if spec.dir_freqs > 0 else 0
+        self.color = mlp(spec.hidden + dir_dim, spec.color_hidden, 1, 3)
+
+    def forward(
+        self, means: torch.Tensor, variances: torch.Tensor, dirs: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Density and radiance of frustum Gaussians.
+
+        Args:
+            means: ``(N, S, 3)`` world-space frustum means; variances: ``(N, S, 3)``.
+            dirs: ``(N, 3)`` unit cone axes (viewing direction for view-dependent radiance).
+        Returns:
+            density ``(N, S)`` (in world units⁻¹ of the contracted space) and radiance ``(N, S, 3)``.
+        """
+        n, s, _ = means.shape
+        c_mean, c_var = contract_gaussian(means, variances)
+        if self.grid is not None:
+            unit = (c_mean / _CONTRACTED_RADIUS + 1) * 0.5
+            # footprint std in [0, 1] grid units: mean per-axis std of the contracted Gaussian
+            scale = c_var.clamp_min(0).mean(-1).sqrt() / (2 * _CONTRACTED_RADIUS)
+            enc = self.grid(unit.reshape(-1, 3), scale.reshape(-1)).reshape(n, s, -1)
+        else:
+            enc = integrated_positional_encoding(c_mean, c_var, 0, self.spec.ipe_max_deg)
+        h = self.trunk(enc)
+        density = F.softplus(h[..., 0] + self.spec.density_bias)
+        feat = h[..., 1:]
+        if self.spec.dir_freqs > 0:
+            d = positional_encoding(dirs, self.spec.dir_freqs)[:, None, :].expand(n, s, -1)
+            feat = torch.cat([feat, d], dim=-1)
+        radiance = F.softplus(self.color(feat))
+        return density, radiance

@@ -1,0 +1,43 @@
+"""Neural fields: sphere initialization, shapes, gradients, both encodings."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from orca.differential import normals_and_curvature_autograd
+from orca.encoding import HashGridSpec
+from orca.fields import EnvironmentField, EnvironmentFieldSpec, SDFField, SDFFieldSpec
+from orca.frustum import conical_frustum_gaussian
+
+SMALL_GRID = HashGridSpec(levels=4, log2_table_size=10, base_resolution=4, max_resolution=32)
+
+
+@pytest.mark.parametrize("encoding", ["hashgrid", "frequency"])
+def test_sdf_starts_as_a_sphere_with_its_curvature(encoding):
+    torch.manual_seed(0)
+    field = SDFField(SDFFieldSpec(encoding=encoding, hash_grid=SMALL_GRID, init_radius=0.5))
+    d = torch.nn.functional.normalize(torch.randn(100, 3), dim=-1)
+    x = 0.5 * d
+    sdf, feats = field(x)
+    assert sdf.abs().max() < 5e-3 and feats.shape == (100, field.spec.feature_dim)
+    n, h = normals_and_curvature_autograd(field.sdf, x)
+    assert (n * d).sum(-1).min() > 0.99
+    assert (h - 2.0).abs().median() < 0.2  # H = 1 / 0.5
+    rgb = field.diffuse(x, feats)
+    assert rgb.shape == (100, 3) and (rgb >= 0).all()
+
+
+@pytest.mark.parametrize("encoding", ["hashgrid", "ipe"])
+def test_environment_field_shapes_and_gradients(encoding):
+    torch.manual_seed(0)
+    env = EnvironmentField(EnvironmentFieldSpec(encoding=encoding, hash_grid=SMALL_GRID, ipe_max_deg=6))
+    o = torch.zeros(8, 3)
+    d = torch.nn.functional.normalize(torch.randn(8, 3), dim=-1).requires_grad_(True)
+    t = torch.linspace(0.1, 10.0, 17).expand(8, 17)
+    mean, var = conical_frustum_gaussian(o, d, torch.full((8,), 0.01), t[:, :-1], t[:, 1:])
+    density, rgb = env(mean, var, d)
+    assert density.shape == (8, 16) and rgb.shape == (8, 16, 3)
+    assert (density >= 0).all() and (rgb >= 0).all()
+    (density.sum() + rgb.sum()).backward()
+    assert d.grad is not None and torch.isfinite(d.grad).all() and d.grad.abs().sum() > 0
