@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from .errors import ConfigError
 
@@ -21,15 +21,15 @@ class StrictModel(BaseModel):
 
 
 class DecodeConfig(StrictModel):
-    """How photos become linear, exposure-normalized radiance."""
+    """How photos become linear, exposure-normalized radiance (``orca decode``; see pipeline/stages/decode.py)."""
 
     white_balance: Literal["reference"] | tuple[float, float, float] = Field(
         "reference",
-        description="'reference': the as-shot white balance of the reference image, applied to every image; "
-        "or explicit (R, G, B) multipliers, normalized so G = 1.",
+        description="'reference': the as-shot white balance of the reference image, applied to every RAW image; "
+        "or explicit (R, G, B) multipliers on camera RGB, normalized so G = 1. JPEG/PNG/TIFF are already balanced.",
     )
     reference_image: str | None = Field(
-        None, description="file name of the reference image (white balance, exposure); default: the first."
+        None, description="file name (or stem) of the reference image (white balance, exposure); default: the first."
     )
     normalize_exposure: bool = Field(
         True, description="scale each image by its EXIF exposure (shutter x ISO / f-number^2) relative to the reference."
@@ -37,8 +37,33 @@ class DecodeConfig(StrictModel):
     min_images: int = Field(3, ge=1, description="fewer usable photos than this is an error.")
     downscale: int = Field(1, ge=1, le=16, description="integer downscale factor (area averaging) after decoding.")
     clip_fraction: float = Field(
-        0.98, gt=0, le=1, description="raw values at or above this fraction of the white level count as clipped."
+        0.98,
+        gt=0,
+        le=1,
+        description="raw values at or above black + clip_fraction x (white - black) count as clipped "
+        "(8/16-bit files: at or above this fraction of the maximum code value).",
     )
+    demosaic: Literal["AHD", "DHT", "VNG", "PPG", "DCB", "AAHD", "LINEAR"] = Field(
+        "AHD", description="LibRaw demosaicing algorithm for RAW files."
+    )
+    color_space: Literal["srgb", "camera"] = Field(
+        "srgb",
+        description="'srgb': linear sRGB primaries via the camera's colour matrix; 'camera': white-balanced "
+        "camera RGB (no matrix; for diagnostics).",
+    )
+    black_level: int | None = Field(
+        None, ge=0, description="override the RAW files' black level (raw units); default: from each file."
+    )
+    white_level: int | None = Field(
+        None, gt=0, description="override the RAW files' white (saturation) level (raw units); default: from each file."
+    )
+
+    @field_validator("white_balance")
+    @classmethod
+    def _positive_multipliers(cls, v: Any) -> Any:
+        if isinstance(v, tuple) and not all(x > 0 for x in v):
+            raise ValueError(f"white balance multipliers must be positive, got {v}")
+        return v
 
 
 class PipelineConfig(StrictModel):

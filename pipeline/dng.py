@@ -223,6 +223,7 @@ def write_dng(
     focal_length_mm: float | None = None,
     focal_length_35mm: float | None = None,
     datetime: _dt.datetime | None = None,
+    orientation: int = 1,
 ) -> dict[str, Any]:
     """Simulate ``sensor`` photographing ``linear_rgb`` and write the raw mosaic as a DNG 1.4 (atomically).
 
@@ -237,6 +238,8 @@ def write_dng(
         noise: shot + read noise on/off (quantization always).
         focal_length_mm, focal_length_35mm: optional EXIF FocalLength / FocalLengthIn35mmFilm (SfM uses them).
         datetime: EXIF DateTime / DateTimeOriginal; default now.
+        orientation: EXIF/TIFF Orientation (1 = as stored; 6 = the camera was turned 90 degrees clockwise,
+            viewers rotate the stored image 90 degrees clockwise). The mosaic is stored as given either way.
 
     Returns a dict (JSON-serializable) with what a ground-truth writer needs, notably ``raw_scale``
     (``(raw - black) / (white - black) = raw_scale * C @ linear_rgb``), ``decoded_from_linear`` (3x3: the
@@ -244,6 +247,8 @@ def write_dng(
     exposure, the neutral, the levels and the fraction of clipped photosites.
     """
     path = Path(path)
+    if orientation not in range(1, 9):
+        raise ValueError(f"orientation must be an EXIF orientation 1..8, got {orientation}")
     x = np.asarray(linear_rgb)
     raw = simulate_raw(x, exposure=exposure, gain=gain, sensor=sensor, rng=rng, noise=noise)
     neutral = as_shot_neutral(sensor, white_balance_illuminant)
@@ -255,6 +260,7 @@ def write_dng(
         exposure=exposure,
         neutral=neutral,
         when=when,
+        orientation=orientation,
         focal_length_mm=focal_length_mm,
         focal_length_35mm=focal_length_35mm,
     )
@@ -352,6 +358,7 @@ def _write_dng_file(
     exposure: Exposure,
     neutral: np.ndarray,
     when: _dt.datetime,
+    orientation: int,
     focal_length_mm: float | None,
     focal_length_35mm: float | None,
 ) -> None:
@@ -363,7 +370,7 @@ def _write_dng_file(
     extratags = [
         (271, "s", 0, sensor.make, True),  # Make
         (272, "s", 0, sensor.model, True),  # Model
-        (274, "H", 1, 1, True),  # Orientation: top-left
+        (274, "H", 1, orientation, True),  # Orientation (1: top-left)
         (33421, "H", 2, (2, 2), True),  # CFARepeatPatternDim
         (33422, "B", 4, cfa, True),  # CFAPattern
         (_EXIF_PLACEHOLDER, "I", 1, 0, True),  # becomes ExifIFD (34665) below

@@ -36,7 +36,8 @@ def colourful(h: int = 96, w: int = 128) -> np.ndarray:
 
 
 def psnr(a: np.ndarray, b: np.ndarray, peak: float = 1.0) -> float:
-    return float(10 * np.log10(peak**2 / np.mean((np.asarray(a, np.float64) - b) ** 2)))
+    mse = float(np.mean((np.asarray(a, np.float64) - b) ** 2))
+    return float("inf") if mse == 0 else float(10 * np.log10(peak**2 / mse))
 
 
 EXP = Exposure(shutter_s=1 / 100, iso=100, f_number=4.0)
