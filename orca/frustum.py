@@ -24,7 +24,9 @@ def conical_frustum_gaussian(
         origins: ``(N, 3)`` cone apexes.
         dirs: ``(N, 3)`` unit axes.
         radius_growth: ``(N,)`` cone radius per unit distance.
-        t0, t1: ``(N, S)`` frustum bounds along the axis, ``0 <= t0 < t1``.
+        t0, t1: ``(N, S)`` frustum bounds along the axis, ``t0 < t1``. Signed values are valid: a virtual
+            cone behind a concave mirror converges to a real focus (``t = 0``) and widens again, and a
+            frustum straddling 0 is that double cone (the moments depend on ``t`` only through ``t²``).
     Returns:
         means ``(N, S, 3)`` and per-axis variances ``(N, S, 3)``.
     """

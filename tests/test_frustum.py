@@ -36,6 +36,25 @@ def test_frustum_gaussian_matches_monte_carlo_moments():
     torch.testing.assert_close(var[0, 0], pts.var(0), atol=0, rtol=2e-2)
 
 
+def test_frustum_gaussian_is_valid_for_signed_intervals_through_the_apex():
+    """A converging virtual cone (concave mirror): the segment from -0.3 to 0.5 crosses the real focus."""
+    g = torch.Generator().manual_seed(1)
+    o, d, r, t0, t1 = torch.zeros(3), torch.tensor([0.0, 0.6, 0.8]), 0.1, -0.3, 0.5
+    u = torch.rand(800_000, generator=g)
+    # volume ∝ t² on both nappes: invert the CDF of t² on [t0, t1] with a signed cube root
+    c = t0**3 + u * (t1**3 - t0**3)
+    t = torch.sign(c) * c.abs() ** (1 / 3)
+    rho = r * t.abs() * torch.sqrt(torch.rand(800_000, generator=g))
+    phi = 2 * math.pi * torch.rand(800_000, generator=g)
+    e1 = torch.tensor([1.0, 0, 0])
+    e2 = torch.linalg.cross(d, e1)
+    pts = o + t[:, None] * d + (rho * phi.cos())[:, None] * e1 + (rho * phi.sin())[:, None] * e2
+    mean, var = conical_frustum_gaussian(o[None], d[None], torch.tensor([r]), torch.tensor([[t0]]),
+                                         torch.tensor([[t1]]))
+    torch.testing.assert_close(mean[0, 0], pts.mean(0), atol=2e-3, rtol=0)
+    torch.testing.assert_close(var[0, 0], pts.var(0), atol=2e-4, rtol=2e-2)
+
+
 def test_contract_is_identity_inside_and_bounded_by_two():
     x = torch.tensor([[0.3, 0.2, -0.1], [10.0, 0, 0], [1e6, 1e6, 0]])
     c = contract(x)
