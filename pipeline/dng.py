@@ -28,7 +28,8 @@ reference image ``r`` of a capture, and every other image after exposure normali
     decoded = gain * exposure_r.value / sensor.full_scale_exposure * linear_rgb  =  decoded_scale(...) * x
 
 (up to noise, demosaicing and clipping at the white level). With a non-white ``white_balance_illuminant``
-the map is the 3x3 matrix ``decoded_from_linear`` in the returned dict instead of a scalar.
+the map is the 3x3 matrix ``decoded_from_linear`` in the returned dict instead of a scalar (for the image
+whose as-shot white balance decode uses: the capture's reference image; decode applies that one to all).
 """
 
 from __future__ import annotations

@@ -252,11 +252,20 @@ def _probe_raster(path: Path, kind: Kind, exif: ExifInfo) -> PhotoInfo:
     from PIL import Image, UnidentifiedImageError
 
     try:
-        with Image.open(path) as im:
-            width, height = im.size
-    except (UnidentifiedImageError, OSError, ValueError) as e:
+        if kind == "tiff":  # tifffile reads every TIFF header (float, planar, 16-bit) that OpenCV decodes
+            import tifffile
+
+            with tifffile.TiffFile(path) as tf:
+                page = tf.pages.first
+                width, height = int(page.imagewidth), int(page.imagelength)
+        else:
+            with Image.open(path) as im:
+                width, height = im.size
+    except Exception as e:  # Pillow/tifffile raise various errors on garbage
         raise InputError(
-            f"not a readable {kind.upper()} image ({e})", path, fix="copy it again or remove it from the capture folder"
+            f"not a readable {kind.upper()} image ({type(e).__name__}: {e})",
+            path,
+            fix="copy it again or remove it from the capture folder",
         ) from e
     w, h = oriented_size(width, height, exif.orientation)
     return PhotoInfo(path, kind, w, h, exif.orientation, exif)

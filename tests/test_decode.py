@@ -79,7 +79,8 @@ def test_exposure_normalization(tmp_path):
     write_dng(cap / "a.dng", img, exposure=E_REF, gain=GAIN, rng=np.random.default_rng(1))
     write_dng(cap / "b.dng", img, exposure=E_OTHER, gain=GAIN, rng=np.random.default_rng(2))
     with rawpy.imread(str(cap / "a.dng")) as ra, rawpy.imread(str(cap / "b.dng")) as rb:
-        ratio_raw = (ra.raw_image_visible.astype(float) - 512).mean() / (rb.raw_image_visible.astype(float) - 512).mean()
+        sa = (ra.raw_image_visible.astype(float) - 512).mean()
+        ratio_raw = sa / (rb.raw_image_visible.astype(float) - 512).mean()
     assert ratio_raw == pytest.approx(E_REF.value / E_OTHER.value, rel=0.01)  # the raw data really differ (~2x)
     res = run_decode(cap, tmp_path / "out", cfg(min_images=2))
     a = read_exr(tmp_path / "out" / "linear" / "a.exr")
@@ -392,6 +393,12 @@ def test_real_kdc_linear_levels_wb(tmp_path):
     green = (colors == 1) | (colors == 3)
     manual = (raw - black) / (white - black)
     assert np.abs(cam[..., 1][green] - manual[green]).max() < 2e-4
+    # a configured black level is honoured (user_black): below it clips to 0
+    run_decode(cap, tmp_path / "b100", cfg(min_images=1, color_space="camera", demosaic="LINEAR", black_level=100))
+    b100 = read_exr(tmp_path / "b100" / "linear" / "k.exr")
+    manual = np.clip((raw - 100) / (white - 100), 0, None)
+    assert np.abs(b100[..., 1][green] - manual[green]).max() < 2e-4
+    assert decode_json(tmp_path / "b100")["images"][0]["levels"]["black_level"] == 100
     # srgb: halving the signal (white level twice as far) halves the output - no gamma, no auto-brightness.
     # Bilinear demosaicing, because AHD picks edge directions from CIELab values, so it is not scale-invariant.
     run_decode(cap, tmp_path / "s1", cfg(min_images=1, demosaic="LINEAR"))
@@ -422,7 +429,8 @@ def test_real_blackmagic_dng(tmp_path):
         black, white = min(r.black_level_per_channel), r.white_level
         wb = np.array(r.camera_whitebalance[:3]) / r.camera_whitebalance[1]
     assert (black, white) == (512, 65535)
-    assert np.allclose(doc["white_balance"]["multipliers"], wb) and doc["white_balance"]["source"] == "as-shot of bm.dng"
+    assert np.allclose(doc["white_balance"]["multipliers"], wb)
+    assert doc["white_balance"]["source"] == "as-shot of bm.dng"
     assert doc["images"][0]["exif"]["shutter_s"] is None  # this file has no exposure EXIF: left out, scale 1
     assert doc["exposure"]["fields_missing_in_all"] == ["shutter_s", "iso", "f_number"]
     # Levels honoured, output not rescaled: the decoded green (a 4x4 area average) has the mean of

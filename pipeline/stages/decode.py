@@ -178,6 +178,12 @@ def run_decode(capture_dir: Path, out_dir: Path, config: DecodeConfig) -> Decode
             fix="add photos to the capture, or lower decode.min_images",
         )
     _check_sizes(infos, photo_dir)
+    kinds = Counter(i.kind for i in infos)
+    if "raw" in kinds and len(kinds) > 1:
+        log.warning(
+            "the capture mixes RAW and %s photos; in-camera JPEG/PNG/TIFF processing (tone curve, white balance) "
+            "will not match the RAW images exactly", "/".join(k.upper() for k in kinds if k != "raw"),
+        )
     ref = _reference(infos, config.reference_image, photo_dir)
     wb, wb_source = _white_balance(infos, ref, config)
     scales, exposure_doc = _exposure_scales(infos, ref, config)
