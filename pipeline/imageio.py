@@ -76,7 +76,8 @@ def write_png(path: str | Path, image: np.ndarray) -> Path:
 
 
 def read_image(path: str | Path) -> np.ndarray:
-    """Read a PNG/JPEG/TIFF as stored (uint8/uint16), RGB(A) order, EXIF orientation applied."""
+    """Read a PNG/JPEG/TIFF as stored (uint8/uint16), RGB(A) order; EXIF orientation is NOT applied
+    (photos go through :mod:`pipeline.raw`, which applies it)."""
     path = Path(path)
     data = np.fromfile(str(path), dtype=np.uint8)
     image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH) if data.size else None

@@ -1,0 +1,59 @@
+"""ORCa: from a folder of photos of a glossy object to its mesh, diffuse/specular parts and the 5D radiance
+field of its surroundings. One rule per stage, each calling the `orca` CLI (the same typed stage function a
+notebook calls), each writing one folder under results/<capture>/ atomically.
+
+    snakemake --cores 2                                   # every capture in config (default: the demo)
+    snakemake --cores 2 -n                                # the plan, nothing run
+    snakemake --cores 8 --config captures='["mug"]' preset=standard
+    snakemake --executor slurm ...                        # a cluster, through an executor plugin
+
+Config keys (all optional): captures (list of folder names under captures_dir), captures_dir, results_dir,
+preset (fast | standard | paper).
+"""
+
+from pathlib import Path
+
+from pipeline.config import PRESETS
+from pipeline.stages.decode import find_photos
+
+KNOWN_KEYS = {"captures", "captures_dir", "results_dir", "preset"}
+unknown = set(config) - KNOWN_KEYS
+if unknown:
+    raise ValueError(f"unknown Snakemake config key(s) {sorted(unknown)}; known: {sorted(KNOWN_KEYS)}")
+
+CAPTURES = config.get("captures", ["demo"])
+if isinstance(CAPTURES, str):
+    CAPTURES = [CAPTURES]
+CAPTURES_DIR = Path(config.get("captures_dir", "captures"))
+RESULTS_DIR = Path(config.get("results_dir", "results"))
+PRESET = config.get("preset", "fast")
+if PRESET not in PRESETS:
+    raise ValueError(f"unknown preset {PRESET!r}; choose one of {', '.join(PRESETS)}")
+
+for name in CAPTURES:
+    if not (CAPTURES_DIR / name).is_dir():
+        raise ValueError(f"capture folder {CAPTURES_DIR / name} does not exist (config 'captures')")
+
+
+def capture_config(wildcards):
+    """The capture's own capture.yaml, when it has one: editing it reruns the stages."""
+    path = CAPTURES_DIR / wildcards.capture / "capture.yaml"
+    return [str(path)] if path.exists() else []
+
+
+rule all:
+    input:
+        expand(RESULTS_DIR / "{capture}" / "decode", capture=CAPTURES),
+
+
+rule decode:
+    """Photos (RAW or JPEG/PNG/TIFF) -> linear exposure-normalized EXR, sRGB PNG, clipped masks."""
+    input:
+        photos=lambda wc: [str(p) for p in find_photos(CAPTURES_DIR / wc.capture)[1]],
+        capture_yaml=capture_config,
+    output:
+        directory(RESULTS_DIR / "{capture}" / "decode"),
+    log:
+        RESULTS_DIR / "{capture}" / "logs" / "decode.log",
+    shell:
+        "orca decode {CAPTURES_DIR}/{wildcards.capture} --out {output} --preset {PRESET} > {log} 2>&1"
