@@ -1,0 +1,63 @@
+"""Load a stage's artifacts as Python objects, for notebooks and later stages.
+
+    >>> from pipeline.results import load_decode
+    >>> dec = load_decode("results/demo/decode")
+    >>> dec.names[:3], dec.linear(dec.names[0]).shape
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .artifacts import MANIFEST, read_json
+from .errors import InputError
+from .imageio import read_exr, read_image
+
+
+@dataclass(frozen=True)
+class DecodeArtifacts:
+    """The decode stage's folder: ``decode.json`` plus per-image linear EXR, sRGB PNG and clipped mask."""
+
+    folder: Path
+
+    @cached_property
+    def meta(self) -> dict[str, Any]:
+        return read_json(self.folder / "decode.json")
+
+    @cached_property
+    def manifest(self) -> dict[str, Any]:
+        return read_json(self.folder / MANIFEST)
+
+    @property
+    def names(self) -> list[str]:
+        return [im["name"] for im in self.meta["images"]]
+
+    def _entry(self, name: str) -> dict[str, Any]:
+        for im in self.meta["images"]:
+            if im["name"] == name:
+                return im
+        raise KeyError(f"{name!r} is not in {self.folder / 'decode.json'}; known: {', '.join(self.names)}")
+
+    def linear(self, name: str) -> np.ndarray:
+        """``(H, W, 3)`` float32 linear, exposure-normalized radiance."""
+        return read_exr(self.folder / self._entry(name)["linear"])
+
+    def srgb(self, name: str) -> np.ndarray:
+        """``(H, W, 3)`` uint8 sRGB."""
+        return read_image(self.folder / self._entry(name)["srgb"])
+
+    def clipped(self, name: str) -> np.ndarray:
+        """``(H, W)`` bool, True where a highlight clipped."""
+        return read_image(self.folder / self._entry(name)["clipped"]) > 127
+
+
+def load_decode(folder: str | Path) -> DecodeArtifacts:
+    folder = Path(folder)
+    if not (folder / "decode.json").is_file():
+        raise InputError("not a decode artifact (no decode.json)", folder, "run `orca decode` on the capture first")
+    return DecodeArtifacts(folder)
