@@ -1,0 +1,50 @@
+"""Training losses (the paper's five): photometric, mask, eikonal, normal orientation, distortion.
+
+All take per-ray tensors of a batch of ``N`` rays and return scalars.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch.nn import functional as F
+
+from .volume import distortion_loss
+
+
+def photometric_loss(pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+    """Charbonnier-smoothed L1 on linear radiance over valid (object, unclipped) pixels.
+
+    Linear radiance spans orders of magnitude (highlights); L1 keeps the bright few from dominating.
+
+    Args:
+        pred, target: ``(N, 3)``; valid: ``(N,)`` bool.
+    """
+    if not valid.any():
+        return pred.sum() * 0.0
+    diff = pred[valid] - target[valid]
+    return torch.sqrt(diff.square() + 1e-6).mean()
+
+
+def mask_loss(opacity: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """Binary cross-entropy between accumulated opacity ``(N,)`` and the object mask ``(N,)`` in {0, 1}."""
+    return F.binary_cross_entropy(opacity.clamp(1e-4, 1 - 1e-4), mask.to(opacity.dtype))
+
+
+def eikonal_loss(sdf_grad: torch.Tensor) -> torch.Tensor:
+    """``(|∇f| − 1)²`` averaged over samples ``(..., 3)``: keeps f a distance function."""
+    return (sdf_grad.norm(dim=-1) - 1.0).square().mean()
+
+
+def normal_orientation_loss(weights: torch.Tensor, normals: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
+    """Ref-NeRF's orientation loss: visible samples should not face away from the camera.
+
+    Args:
+        weights: ``(N, S)``; normals: ``(N, S, 3)`` unit; dirs: ``(N, 3)`` unit ray directions.
+    """
+    facing_away = (normals * dirs[:, None]).sum(-1).clamp_min(0)
+    return (weights * facing_away.square()).sum(-1).mean()
+
+
+def cone_distortion_loss(env_weights: torch.Tensor, env_s: torch.Tensor) -> torch.Tensor:
+    """Distortion loss along virtual cones ``(N, K, E)`` with shared normalized edges ``(E + 1,)``."""
+    return distortion_loss(env_weights, env_s.expand(*env_weights.shape[:-1], -1)).mean()

@@ -1,0 +1,49 @@
+"""Losses: each is zero at its optimum and positive away from it, with gradients in the right direction."""
+
+from __future__ import annotations
+
+import torch
+
+from orca.losses import (
+    cone_distortion_loss,
+    eikonal_loss,
+    mask_loss,
+    normal_orientation_loss,
+    photometric_loss,
+)
+
+
+def test_photometric_loss_ignores_invalid_pixels():
+    pred = torch.tensor([[0.5, 0.5, 0.5], [9.0, 9.0, 9.0]])
+    target = torch.tensor([[0.5, 0.5, 0.5], [0.0, 0.0, 0.0]])
+    assert photometric_loss(pred, target, torch.tensor([True, False])) < 1e-2
+    assert photometric_loss(pred, target, torch.tensor([True, True])) > 4.0
+    assert photometric_loss(pred, target, torch.tensor([False, False])) == 0
+
+
+def test_mask_loss_prefers_matching_opacity():
+    mask = torch.tensor([1.0, 0.0, 1.0])
+    assert mask_loss(torch.tensor([0.99, 0.01, 0.99]), mask) < mask_loss(torch.tensor([0.5, 0.5, 0.5]), mask)
+    assert torch.isfinite(mask_loss(torch.tensor([0.0, 1.0, 0.0]), mask))
+
+
+def test_eikonal_loss_is_zero_for_unit_gradients():
+    g = torch.nn.functional.normalize(torch.randn(10, 5, 3), dim=-1)
+    assert eikonal_loss(g) < 1e-12
+    assert torch.isclose(eikonal_loss(2 * g), torch.tensor(1.0))
+
+
+def test_normal_orientation_penalizes_back_facing_only():
+    d = torch.tensor([[0.0, 0.0, 1.0]])
+    w = torch.tensor([[1.0]])
+    facing = torch.tensor([[[0.0, 0.0, -1.0]]])
+    assert normal_orientation_loss(w, facing, d) == 0
+    assert normal_orientation_loss(w, -facing, d) == 1
+
+
+def test_cone_distortion_loss_prefers_concentrated_weights():
+    s = torch.linspace(0, 1, 9)
+    spike = torch.zeros(2, 1, 8)
+    spike[..., 3] = 1.0
+    spread = torch.full((2, 1, 8), 1 / 8)
+    assert cone_distortion_loss(spike, s) < cone_distortion_loss(spread, s)
