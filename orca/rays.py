@@ -15,7 +15,7 @@ import torch
 PIXEL_RADIUS_FACTOR = 2.0 / math.sqrt(12.0)
 
 
-def pixel_centers(height: int, width: int, dtype: torch.dtype = torch.float32, device=None) -> torch.Tensor:
+def pixel_centers(height: int, width: int, dtype: torch.dtype | None = None, device=None) -> torch.Tensor:
     """``(H, W, 2)`` pixel centres ``(u, v)`` in COLMAP's convention."""
     v, u = torch.meshgrid(
         torch.arange(height, dtype=dtype, device=device) + 0.5,
