@@ -1,0 +1,288 @@
+"""Named synthetic scenes as data: a glossy object in a closed, textured room with props close by.
+
+World frame (the ground-truth frame): z up, the object's bounding sphere is centred at the origin with the
+radius in :attr:`ObjectSpec.radius` (1 for every preset), the object rests on the floor (``floor_z`` is the
+object's lowest point). Props stand on the floor (or on another prop) one to three object radii from the
+object's surface, so the reflections show close-by things at several depths, and the walls further out.
+
+A preset is a :class:`SceneSpec`; :data:`SCENES` maps names to them. Only geometry is resolved here
+(:func:`resolve`), nothing imports Mitsuba.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Literal
+
+import numpy as np
+
+from . import geometry
+from .textures import PosterStyle
+
+Vec3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class AlbedoSpec:
+    """The object's diffuse colour: a uniform linear RGB, or a poster texture (``texture=True``)."""
+
+    rgb: Vec3 = (0.2, 0.2, 0.2)
+    texture: bool = False
+    texture_size: tuple[int, int] = (1024, 512)  # (width, height) of the UV texture
+    # Dark diffuse range, so the (few percent) specular reflection stays visible on top of it.
+    style: PosterStyle = PosterStyle(reflectance=(0.02, 0.25), shapes_per_megapixel=250.0, min_scale=0.02)
+
+
+@dataclass(frozen=True)
+class ObjectSpec:
+    """The glossy object: a smooth (or slightly rough) dielectric coat over a diffuse base (Mitsuba plastic)."""
+
+    kind: Literal["sphere", "torus", "blob"]
+    radius: float = 1.0  # bounding-sphere radius, centred at the origin
+    albedo: AlbedoSpec = AlbedoSpec()
+    int_ior: float = 1.8  # coat IOR; 1.8 reflects ~8 % at normal incidence (more at grazing)
+    roughness: float | None = None  # None: smooth `plastic`; else `roughplastic` (GGX alpha)
+    # torus: tube centre-line radius and tube radius, as fractions of `radius` (major + minor = 1)
+    torus_major: float = 0.68
+    torus_minor: float = 0.32
+    tilt_deg: Vec3 = (0.0, 0.0, 0.0)  # rotation about x, y, z (applied in that order) for meshes
+    # blob: von Mises bumps (amplitude > 0) and dents (< 0) on the unit sphere
+    bump_centres: tuple[Vec3, ...] = ()
+    bump_amplitudes: tuple[float, ...] = ()
+    bump_sharpness: tuple[float, ...] = ()
+    mesh_resolution: tuple[int, int] = (160, 80)  # grid (around, across) of parametric meshes
+
+
+@dataclass(frozen=True)
+class PropSpec:
+    """A textured prop. ``xy`` is the centre on the floor plan; it stands on the floor, raised by ``lift``."""
+
+    kind: Literal["box", "cylinder", "sphere"]
+    xy: tuple[float, float]
+    size: Vec3  # box: half extents (x, y, z); cylinder: (radius, radius, height); sphere: (r, r, r)
+    yaw_deg: float = 0.0  # rotation about z (boxes)
+    lift: float = 0.0  # extra height of the bottom above the floor (e.g. stacked on another prop)
+    name: str = ""
+
+
+@dataclass(frozen=True)
+class RoomSpec:
+    """A closed box room: walls at x = +-half_x, y = +-half_y, floor at the object's base, ceiling above."""
+
+    half_x: float = 8.0
+    half_y: float = 8.0
+    height: float = 6.5
+    texels_per_unit: float = 96.0  # wall/floor poster resolution
+    max_texture: int = 2048
+    style: PosterStyle = PosterStyle()
+    prop_texels_per_unit: float = 256.0
+
+
+@dataclass(frozen=True)
+class LightSpec:
+    """A one-sided rectangular area light (``size`` = full width, height) facing ``normal``."""
+
+    centre: Vec3
+    size: tuple[float, float]
+    normal: Vec3
+    radiance: Vec3
+    name: str = "light"
+
+
+@dataclass(frozen=True)
+class RigSpec:
+    """Hand-held cameras around the object: interleaved rings at a few elevations, all looking at it."""
+
+    distance: tuple[float, float] = (5.6, 6.6)  # from the object centre; ~1/3 of the frame width at fov 60
+    elevations_deg: tuple[float, ...] = (20.0, 32.0, 42.0)
+    fov_x_deg: float = 60.0
+    azimuth_jitter_deg: float = 3.0
+    elevation_jitter_deg: float = 3.0
+    target_jitter: float = 0.08  # look-at point jitter (world units), so the object is not always dead centre
+    roll_jitter_deg: float = 2.0
+    sensor_width_mm: float = 6.4  # for EXIF focal length (a phone's main camera)
+
+
+@dataclass(frozen=True)
+class EnvViewSpec:
+    """Environment ground truth: cube views from the object centre, and translated views behind a prop."""
+
+    cube_fov_deg: float = 90.0
+    parallax_prop: str = "occluder"  # name of the prop to look at
+    parallax_offsets: tuple[float, ...] = (-0.75, 0.0, 0.75)  # sideways shifts, fractions of object radius
+    parallax_fov_deg: float = 70.0
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    name: str
+    object: ObjectSpec
+    props: tuple[PropSpec, ...]
+    lights: tuple[LightSpec, ...]
+    room: RoomSpec = RoomSpec()
+    rig: RigSpec = RigSpec()
+    env: EnvViewSpec = EnvViewSpec()
+    # Path length in Mitsuba's counting: 3 = direct light plus one bounce (camera -> object -> room -> light
+    # sample), which is what a reflection of a lit prop needs; 4 looks the same here at twice the cost.
+    max_depth: int = 3
+    texture_seed: int = 0  # textures depend only on this (and the surface), not on the render seed
+
+
+# --------------------------------------------------------------------------------------------- presets
+
+# Props within one to three object radii of the object's surface, at several heights and depths.
+DEFAULT_PROPS: tuple[PropSpec, ...] = (
+    PropSpec("box", (2.3, 1.0), (0.45, 0.35, 0.5), yaw_deg=25.0, name="crate"),
+    PropSpec("sphere", (2.3, 1.0), (0.25, 0.25, 0.25), lift=1.0, name="ball_on_crate"),
+    PropSpec("cylinder", (-1.5, 2.1), (0.4, 0.4, 1.6), name="occluder"),
+    PropSpec("sphere", (0.9, -2.4), (0.5, 0.5, 0.5), name="ball"),
+    PropSpec("box", (-2.5, -1.0), (0.3, 0.55, 0.75), yaw_deg=-35.0, name="tall_box"),
+    PropSpec("cylinder", (2.2, -1.5), (0.35, 0.35, 0.7), name="drum"),
+    PropSpec("box", (0.3, 3.2), (0.6, 0.25, 0.4), yaw_deg=10.0, name="bench"),
+)
+
+# Light positions are relative to the floor at z = 0 here and are shifted with it (see `resolve`).
+DEFAULT_LIGHTS: tuple[LightSpec, ...] = (
+    LightSpec((0.8, -0.6, 6.49), (2.6, 2.6), (0.0, 0.0, -1.0), (9.0, 9.0, 8.5), name="ceiling_panel"),
+    LightSpec((-7.99, 1.0, 3.4), (2.0, 1.4), (1.0, 0.0, 0.0), (3.0, 3.3, 3.8), name="window"),
+)
+
+SCENES: dict[str, SceneSpec] = {
+    "sphere": SceneSpec(
+        name="sphere",
+        object=ObjectSpec("sphere", albedo=AlbedoSpec(texture=True)),
+        props=DEFAULT_PROPS,
+        lights=DEFAULT_LIGHTS,
+        texture_seed=101,
+    ),
+    "torus": SceneSpec(
+        name="torus",
+        object=ObjectSpec("torus", albedo=AlbedoSpec(rgb=(0.25, 0.04, 0.03)), tilt_deg=(25.0, 0.0, 30.0)),
+        props=DEFAULT_PROPS,
+        lights=DEFAULT_LIGHTS,
+        texture_seed=202,
+    ),
+    "blob": SceneSpec(
+        name="blob",
+        object=ObjectSpec(
+            "blob",
+            albedo=AlbedoSpec(texture=True),
+            bump_centres=((1, 0, 0.2), (0, 1, 0.5), (-1, -0.6, 0.8), (0.2, -1, -0.2), (-0.7, 0.6, -0.6),
+                          (0.5, 0.5, -1), (0, 0, 1), (0.8, -0.5, 0.7)),
+            bump_amplitudes=(0.45, -0.35, 0.4, -0.35, 0.3, -0.3, 0.25, -0.3),
+            bump_sharpness=(4.0, 7.0, 5.0, 7.0, 4.0, 7.0, 4.0, 8.0),
+        ),
+        props=DEFAULT_PROPS,
+        lights=DEFAULT_LIGHTS,
+        texture_seed=303,
+    ),
+}
+
+
+def get_scene(name_or_spec: str | SceneSpec) -> SceneSpec:
+    """A preset by name (case-insensitive), or the spec itself."""
+    if isinstance(name_or_spec, SceneSpec):
+        return name_or_spec
+    key = str(name_or_spec).lower()
+    if key not in SCENES:
+        from ..errors import InputError
+
+        raise InputError(f"unknown scene {name_or_spec!r}; choose one of: {', '.join(SCENES)}")
+    return SCENES[key]
+
+
+# ------------------------------------------------------------------------------------- resolved geometry
+
+
+@dataclass
+class ResolvedProp:
+    """A prop in world coordinates: ``centre`` of its bounding box, ``size`` as in :class:`PropSpec`."""
+
+    name: str
+    kind: str
+    centre: np.ndarray  # (3,)
+    size: np.ndarray  # (3,)
+    yaw_deg: float
+    texture_seed: int
+
+    def to_json(self) -> dict:
+        return {"name": self.name, "kind": self.kind, "centre": self.centre.tolist(), "size": self.size.tolist(),
+                "size_meaning": _SIZE_MEANING[self.kind], "yaw_deg": self.yaw_deg}
+
+
+_SIZE_MEANING = {
+    "box": "half extents (x, y, z) before the yaw rotation about z",
+    "cylinder": "(radius, radius, height); axis along z through the centre",
+    "sphere": "(radius, radius, radius)",
+}
+
+
+@dataclass
+class ResolvedScene:
+    """A :class:`SceneSpec` with its object mesh built and everything placed in world coordinates."""
+
+    spec: SceneSpec
+    mesh: geometry.TriMesh  # the object's mesh in the world frame (a fine UV sphere for the sphere scene)
+    floor_z: float
+    props: list[ResolvedProp]
+    lights: list[LightSpec]  # with world-space centres
+    room_min: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    room_max: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    @property
+    def object_radius(self) -> float:
+        return self.spec.object.radius
+
+    def prop(self, name: str) -> ResolvedProp:
+        for p in self.props:
+            if p.name == name:
+                return p
+        raise KeyError(f"scene {self.spec.name!r} has no prop named {name!r}")
+
+
+def rotation_xyz(deg: Vec3) -> np.ndarray:
+    """Rotation about x, then y, then z (degrees), as a 3x3 matrix."""
+    ax, ay, az = np.deg2rad(deg)
+    rx = np.array([[1, 0, 0], [0, math.cos(ax), -math.sin(ax)], [0, math.sin(ax), math.cos(ax)]])
+    ry = np.array([[math.cos(ay), 0, math.sin(ay)], [0, 1, 0], [-math.sin(ay), 0, math.cos(ay)]])
+    rz = np.array([[math.cos(az), -math.sin(az), 0], [math.sin(az), math.cos(az), 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+def object_mesh(obj: ObjectSpec) -> geometry.TriMesh:
+    """The object's mesh in the world frame, bounding radius ``obj.radius`` about the origin."""
+    around, across = obj.mesh_resolution
+    if obj.kind == "sphere":
+        mesh = geometry.uv_sphere(1.0, around, across)
+    elif obj.kind == "torus":
+        total = obj.torus_major + obj.torus_minor
+        mesh = geometry.torus(obj.torus_major / total, obj.torus_minor / total, around, max(16, across // 2))
+    elif obj.kind == "blob":
+        if not (len(obj.bump_centres) == len(obj.bump_amplitudes) == len(obj.bump_sharpness) > 0):
+            raise ValueError("blob: bump_centres, bump_amplitudes and bump_sharpness must be equally long, >= 1")
+        mesh = geometry.blob(obj.bump_centres, obj.bump_amplitudes, obj.bump_sharpness, around, across)
+    else:
+        raise ValueError(f"unknown object kind {obj.kind!r}")
+    return mesh.transformed(rotation_xyz(obj.tilt_deg), obj.radius / mesh.bounding_radius)
+
+
+def resolve(spec: SceneSpec) -> ResolvedScene:
+    """Build the object mesh and place the floor, props and lights in the world frame."""
+    mesh = object_mesh(spec.object)
+    floor_z = float(mesh.vertices[:, 2].min())
+    props: list[ResolvedProp] = []
+    for i, p in enumerate(spec.props):
+        sx, sy, sz = p.size
+        height = 2 * sz if p.kind == "box" else (sz if p.kind == "cylinder" else 2 * sz)
+        centre = np.array([p.xy[0], p.xy[1], floor_z + p.lift + height / 2])
+        props.append(ResolvedProp(p.name or f"prop{i}", p.kind, centre, np.array(p.size, float), p.yaw_deg,
+                                  spec.texture_seed * 1000 + 100 + i))
+    lights = [replace(light, centre=(light.centre[0], light.centre[1], light.centre[2] + floor_z))
+              for light in spec.lights]
+    room = spec.room
+    return ResolvedScene(
+        spec, mesh, floor_z, props, lights,
+        room_min=np.array([-room.half_x, -room.half_y, floor_z]),
+        room_max=np.array([room.half_x, room.half_y, floor_z + room.height]),
+    )
