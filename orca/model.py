@@ -1,0 +1,111 @@
+"""The ORCa model: SDF + diffuse head, environment radiance field, learnable VolSDF β; and its objective.
+
+``OrcaModel`` renders object rays (diffuse + specular through virtual cones) and environment rays (virtual
+cameras anywhere, or background pixels that see the room directly). ``objective`` turns a batch into the
+weighted sum of the paper's losses, with a mask-only warm-up phase.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal, NamedTuple
+
+import torch
+from torch import nn
+
+from .fields import EnvironmentField, EnvironmentFieldSpec, SDFField, SDFFieldSpec
+from .losses import cone_distortion_loss, eikonal_loss, mask_loss, normal_orientation_loss, photometric_loss
+from .render import RayOutputs, RenderSpec, render_environment_along, render_rays
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    sdf: SDFFieldSpec = field(default_factory=SDFFieldSpec)
+    env: EnvironmentFieldSpec = field(default_factory=EnvironmentFieldSpec)
+    render: RenderSpec = field(default_factory=RenderSpec)
+    beta_init: float = 0.05
+    beta_min: float = 1e-4  # keeps the density finite however sharp the surface gets
+
+
+class OrcaModel(nn.Module):
+    def __init__(self, spec: ModelSpec = ModelSpec()):
+        super().__init__()
+        self.spec = spec
+        self.sdf_field = SDFField(spec.sdf)
+        self.env_field = EnvironmentField(spec.env)
+        self.log_beta = nn.Parameter(torch.tensor(math.log(spec.beta_init - spec.beta_min)))
+
+    @property
+    def beta(self) -> torch.Tensor:
+        return self.spec.beta_min + self.log_beta.exp()
+
+    def forward(self, origins: torch.Tensor, dirs: torch.Tensor, radii: torch.Tensor) -> RayOutputs:
+        """Object rays ``(N, 3), (N, 3), (N,)`` -> :class:`RayOutputs`."""
+        return render_rays(self.sdf_field, self.env_field, self.beta, origins, dirs, radii, self.spec.render)
+
+    def environment(
+        self, origins: torch.Tensor, dirs: torch.Tensor, radii: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Radiance ``(N, 3)`` and z-free ray depth ``(N,)`` of the environment field alone (object absent),
+        seen by ordinary camera cones from ``origins``."""
+        rgb, depth, _, _ = render_environment_along(
+            self.env_field, origins, dirs, radii, torch.zeros_like(radii), self.spec.render
+        )
+        return rgb, depth
+
+
+@dataclass(frozen=True)
+class LossWeights:
+    photometric: float = 1.0
+    mask: float = 0.1
+    eikonal: float = 0.1
+    orientation: float = 1e-3
+    distortion: float = 1e-3
+    background: float = 0.5  # background pixels supervise the environment field directly (beyond the paper)
+
+
+class Batch(NamedTuple):
+    """``N`` rays with their targets."""
+
+    origins: torch.Tensor  # (N, 3)
+    dirs: torch.Tensor  # (N, 3)
+    radii: torch.Tensor  # (N,)
+    rgb: torch.Tensor  # (N, 3) linear target
+    mask: torch.Tensor  # (N,) object mask in {0, 1}
+    valid: torch.Tensor  # (N,) not clipped
+
+
+Phase = Literal["mask", "joint"]
+
+_OPACITY_EPS = 1e-6
+
+
+def objective(
+    model: OrcaModel, batch: Batch, weights: LossWeights, phase: Phase
+) -> tuple[torch.Tensor, dict[str, torch.Tensor], RayOutputs]:
+    """Weighted loss of a batch; ``phase="mask"`` trains geometry from silhouettes only (warm-up).
+
+    Returns:
+        total loss, the unweighted terms (detached, for logging), and the render.
+    """
+    out = model(batch.origins, batch.dirs, batch.radii)
+    obj = batch.mask > 0.5
+    terms: dict[str, torch.Tensor] = {
+        "mask": mask_loss(out.opacity, batch.mask),
+        "eikonal": eikonal_loss(out.sdf_grad),
+    }
+    if phase == "joint":
+        normals = torch.nn.functional.normalize(out.sdf_grad, dim=-1)
+        # The surface's colour (radiance per unit opacity): otherwise the quickest way to darken a too-bright
+        # start is to thin the surface, and the photometric term fights the silhouettes the mask term learns.
+        surface_rgb = out.rgb / out.opacity.clamp_min(_OPACITY_EPS)[:, None]
+        terms["photometric"] = photometric_loss(surface_rgb, batch.rgb, obj & batch.valid)
+        terms["orientation"] = normal_orientation_loss(out.weights, normals, batch.dirs)
+        terms["distortion"] = cone_distortion_loss(out.env_weights, out.env_s)
+        if weights.background > 0 and (~obj).any():
+            bg = ~obj & batch.valid
+            env_rgb, _ = model.environment(batch.origins[bg], batch.dirs[bg], batch.radii[bg])
+            terms["background"] = photometric_loss(env_rgb, batch.rgb[bg], torch.ones_like(bg[bg]))
+    total = sum(getattr(weights, k) * v for k, v in terms.items())
+    return total, {k: v.detach() for k, v in terms.items()}, out
