@@ -17,6 +17,7 @@ from .log import setup_logging
 
 # (subcommand, module defining register()) in DAG order.
 COMMANDS: list[tuple[str, str]] = [
+    ("synth", "pipeline.synth.cli"),
     ("decode", "pipeline.stages.decode"),
 ]
 
