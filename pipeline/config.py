@@ -66,18 +66,85 @@ class DecodeConfig(StrictModel):
         return v
 
 
+class LossConfig(StrictModel):
+    """Weights of the training losses (see orca/model.py)."""
+
+    photometric: float = Field(1.0, ge=0)
+    mask: float = Field(0.1, ge=0)
+    eikonal: float = Field(0.1, ge=0)
+    orientation: float = Field(1e-3, ge=0)
+    distortion: float = Field(1e-3, ge=0)
+    background: float = Field(0.5, ge=0, description="background pixels supervise the environment field")
+
+
+class TrainConfig(StrictModel):
+    """Training the ORCa model (``orca train``). Sizes default to the ``standard`` preset."""
+
+    iterations: int = Field(20000, ge=1)
+    batch_rays: int = Field(2048, ge=8)
+    mask_warmup: int = Field(1000, ge=0, description="iterations of silhouette-only training first")
+    lr: float = Field(5e-3, gt=0)
+    lr_final_ratio: float = Field(0.05, gt=0, le=1, description="exponential decay to lr x ratio at the end")
+    grad_clip: float = Field(1.0, gt=0)
+    object_fraction: float = Field(0.5, ge=0, le=1, description="share of rays drawn from object pixels")
+    checkpoint_every: int = Field(500, ge=1)
+    preview_every: int = Field(1000, ge=1)
+    preview_downscale: int = Field(4, ge=1)
+    log_every: int = Field(50, ge=1)
+    keep_checkpoints: int = Field(3, ge=1)
+    device: Literal["auto", "cpu", "cuda"] = "auto"
+    seed: int = 0
+    scene_radius: float = Field(1.2, gt=0, description="rays are sampled inside this sphere (object in the unit sphere)")
+    # geometry
+    sdf_encoding: Literal["hashgrid", "frequency"] = "hashgrid"
+    sdf_hidden: int = Field(64, ge=8)
+    sdf_layers: int = Field(2, ge=1)
+    sdf_init_radius: float = Field(0.7, gt=0)
+    grid_levels: int = Field(12, ge=1)
+    grid_log2_table: int = Field(16, ge=8, le=24)
+    grid_max_resolution: int = Field(1024, ge=16)
+    # environment
+    env_encoding: Literal["hashgrid", "ipe"] = "hashgrid"
+    env_hidden: int = Field(64, ge=8)
+    env_layers: int = Field(2, ge=1)
+    env_grid_log2_table: int = Field(17, ge=8, le=24)
+    # rendering
+    n_coarse: int = Field(48, ge=4)
+    n_fine: int = Field(32, ge=0)
+    env_samples: int = Field(48, ge=4)
+    cone_samples: int = Field(2, ge=1, description="top-weight primary samples that cast virtual cones")
+    cone_method: Literal["closed_form", "bounding_rays", "naive"] = "closed_form"
+    ior: float = Field(1.5, gt=1, description="index of refraction of the glossy coating (Fresnel)")
+    beta_init: float = Field(0.05, gt=0)
+    losses: LossConfig = Field(default_factory=LossConfig)
+
+
 class PipelineConfig(StrictModel):
     preset: str = "standard"
     decode: DecodeConfig = Field(default_factory=DecodeConfig)
+    train: TrainConfig = Field(default_factory=TrainConfig)
 
 
 PRESETS: dict[str, dict[str, Any]] = {
     # CPU, the demo capture, tests: small images, small networks.
-    "fast": {"decode": {"downscale": 1}},
+    "fast": {
+        "decode": {"downscale": 1},
+        "train": {
+            "iterations": 3000, "batch_rays": 512, "mask_warmup": 300, "checkpoint_every": 250,
+            "preview_every": 500, "grid_levels": 8, "grid_log2_table": 14, "grid_max_resolution": 256,
+            "env_grid_log2_table": 15, "n_coarse": 32, "n_fine": 16, "env_samples": 24,
+        },
+    },
     # A GPU and a real capture.
     "standard": {},
     # The paper's network sizes and sample counts.
-    "paper": {},
+    "paper": {
+        "train": {
+            "sdf_encoding": "frequency", "sdf_hidden": 256, "sdf_layers": 8, "env_encoding": "ipe",
+            "env_hidden": 256, "env_layers": 8, "n_coarse": 64, "n_fine": 128, "env_samples": 128,
+            "cone_samples": 4, "cone_method": "bounding_rays", "iterations": 200000, "batch_rays": 1024,
+        },
+    },
 }
 
 
@@ -136,3 +203,29 @@ def load_config(
     except ValidationError as e:
         where = ", ".join(str(f) for f in files if f is not None) or "config"
         raise ConfigError(f"{where}: invalid configuration:\n{e}") from e
+
+
+def add_config_arguments(parser: Any) -> None:
+    """The config options every stage's CLI shares: ``--preset``, ``--config``, ``--set``."""
+    parser.add_argument("--preset", default=None, help=f"config preset ({', '.join(PRESETS)})")
+    parser.add_argument("--config", type=Path, default=None, help="YAML config file")
+    parser.add_argument(
+        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+        help="override a config value, e.g. train.iterations=500 (repeatable; the stage's section may be omitted)",
+    )
+
+
+def config_from_arguments(args: Any, section: str, capture_yaml: Path | None = None) -> PipelineConfig:
+    """Load the config from parsed ``add_config_arguments`` options; bare keys belong to ``section``."""
+    fields = type(getattr(PipelineConfig(), section)).model_fields
+
+    def qualify(item: str) -> str:
+        key = item.split("=", 1)[0].strip()
+        return f"{section}.{item.strip()}" if "." not in key and key in fields else item
+
+    return load_config(
+        capture_yaml if capture_yaml is not None and capture_yaml.is_file() else None,
+        args.config,
+        preset=args.preset,
+        overrides=[qualify(o) for o in args.overrides],
+    )

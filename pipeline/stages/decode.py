@@ -41,7 +41,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..config import DecodeConfig, load_config
+from ..config import DecodeConfig, add_config_arguments, config_from_arguments
 from ..errors import InputError
 
 if TYPE_CHECKING:
@@ -434,30 +434,12 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument("capture", type=Path, help="capture folder (photos at its top level or in images/)")
     p.add_argument("--out", type=Path, default=None, help="output folder (default: results/<capture name>/decode)")
-    p.add_argument("--preset", default=None, help="config preset (fast, standard, paper)")
-    p.add_argument("--config", type=Path, default=None, help="YAML config file")
-    p.add_argument(
-        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-        help="override a config value, e.g. decode.downscale=2 (repeatable)",
-    )
+    add_config_arguments(p)
     p.set_defaults(func=main)
-
-
-def _qualify(item: str) -> str:
-    key = item.split("=", 1)[0].strip()
-    if "." not in key and key in DecodeConfig.model_fields:
-        return f"decode.{item.strip()}"
-    return item
 
 
 def main(args: argparse.Namespace) -> DecodeResult:
     capture = Path(args.capture)
-    capture_yaml = capture / "capture.yaml"
-    config = load_config(
-        capture_yaml if capture_yaml.is_file() else None,
-        args.config,
-        preset=args.preset,
-        overrides=[_qualify(o) for o in args.overrides],
-    )
+    config = config_from_arguments(args, "decode", capture / "capture.yaml")
     out = args.out if args.out is not None else Path("results") / capture.resolve().name / "decode"
     return run_decode(capture, out, config.decode)
