@@ -19,6 +19,7 @@ from .log import setup_logging
 COMMANDS: list[tuple[str, str]] = [
     ("synth", "pipeline.synth.cli"),
     ("decode", "pipeline.stages.decode"),
+    ("train", "pipeline.stages.train"),
 ]
 
 log = logging.getLogger("orca")

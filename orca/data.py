@@ -1,0 +1,66 @@
+"""Training rays from a set of posed images held in memory (tensors only; files are pipeline/'s job)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from .model import Batch
+from .rays import camera_rays
+
+
+@dataclass
+class ImageSet:
+    """``N`` posed images of equal size.
+
+    Attributes:
+        images: ``(N, H, W, 3)`` linear radiance.
+        masks: ``(N, H, W)`` bool object masks.
+        valid: ``(N, H, W)`` bool, False where a highlight clipped.
+        K: ``(N, 3, 3)`` intrinsics; c2w: ``(N, 4, 4)`` camera-to-world (OpenCV).
+    """
+
+    images: torch.Tensor
+    masks: torch.Tensor
+    valid: torch.Tensor
+    K: torch.Tensor
+    c2w: torch.Tensor
+
+    def __post_init__(self) -> None:
+        n, h, w, _ = self.images.shape
+        if self.masks.shape != (n, h, w) or self.valid.shape != (n, h, w):
+            raise ValueError(f"masks {tuple(self.masks.shape)} / valid {tuple(self.valid.shape)} vs images {(n, h, w)}")
+        if self.K.shape != (n, 3, 3) or self.c2w.shape != (n, 4, 4):
+            raise ValueError("K must be (N, 3, 3) and c2w (N, 4, 4)")
+        self._object_idx = self.masks.reshape(-1).nonzero().squeeze(-1)
+        if self._object_idx.numel() == 0:
+            raise ValueError("every mask is empty: there is no object to train on")
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        n, h, w, _ = self.images.shape
+        return n, h, w
+
+    def to(self, device: torch.device | str) -> ImageSet:
+        return ImageSet(*(t.to(device) for t in (self.images, self.masks, self.valid, self.K, self.c2w)))
+
+    def sample(self, n_rays: int, object_fraction: float, generator: torch.Generator | None = None) -> Batch:
+        """Random pixels, ``object_fraction`` of them on the object (the rest anywhere), as a :class:`Batch`."""
+        n, h, w = self.shape
+        device = self.images.device
+        n_obj = int(round(n_rays * object_fraction))
+        pick = torch.randint(0, self._object_idx.numel(), (n_obj,), generator=generator, device="cpu").to(device)
+        flat_obj = self._object_idx[pick]
+        flat_any = torch.randint(0, n * h * w, (n_rays - n_obj,), generator=generator, device="cpu").to(device)
+        flat = torch.cat([flat_obj, flat_any])
+        img, rem = flat // (h * w), flat % (h * w)
+        row, col = rem // w, rem % w
+        # a random point inside each pixel (anti-aliasing); pixel (row, col) spans [col, col+1) x [row, row+1)
+        jitter = torch.rand(flat.shape[0], 2, generator=generator, device="cpu").to(device, self.images.dtype)
+        uv = torch.stack([col, row], dim=-1).to(self.images.dtype) + jitter
+        origins, dirs, radii = camera_rays(uv, self.K[img], self.c2w[img])
+        return Batch(
+            origins=origins, dirs=dirs, radii=radii, rgb=self.images[img, row, col],
+            mask=self.masks[img, row, col].to(self.images.dtype), valid=self.valid[img, row, col],
+        )

@@ -1,0 +1,451 @@
+"""The train stage: decoded photos + cameras + masks -> a trained ORCa model.
+
+Writes ``results/<capture>/train/`` atomically when training finishes (final weights, the config used,
+metrics, previews, tensorboard events, ``train_report.json``, ``manifest.json``). Checkpoints live beside it
+in ``train.checkpoints/`` so an interrupted run (Ctrl-C, a crash, a killed job) resumes from the last one:
+``orca train`` resumes by default, ``--restart`` starts over.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..artifacts import atomic_dir, atomic_path, write_json, write_manifest
+from ..cameras import CameraSet, load_cameras
+from ..config import TrainConfig, add_config_arguments, config_from_arguments
+from ..errors import InputError, OrcaError
+
+log = logging.getLogger("orca.train")
+
+CHECKPOINT_SUFFIX = ".checkpoints"
+FINAL_WEIGHTS = "model.pt"
+CHECKPOINT_FORMAT = 1
+
+
+class TrainingDiverged(OrcaError):
+    """The loss or a gradient became NaN/Inf; nothing was written for the bad step."""
+
+
+@dataclass(frozen=True)
+class TrainResult:
+    out_dir: Path
+    iterations: int
+    seconds: float
+    final_losses: dict[str, float]
+
+
+# ------------------------------------------------------------------------------------------------ data
+
+
+def load_image_set(decode_dir: Path, cameras_path: Path, masks_dir: Path):
+    """Decoded images matched by name to cameras and masks, intrinsics scaled to the decoded size.
+
+    Returns:
+        (``orca.data.ImageSet`` in float32 on the CPU, the image names, the camera set).
+    """
+    import torch
+
+    from ..imageio import read_image
+    from ..results import load_decode
+    from orca.data import ImageSet
+
+    decoded = load_decode(decode_dir)
+    cams = load_cameras(cameras_path).by_name()
+    names = [n for n in decoded.names if n in cams]
+    missing = [n for n in decoded.names if n not in cams]
+    if missing:
+        log.warning("%d decoded image(s) have no camera in %s and are not used: %s",
+                    len(missing), cameras_path, ", ".join(missing[:10]))
+    if len(names) < 2:
+        raise InputError(
+            f"only {len(names)} decoded image(s) have a camera (names must match the decoded file stems)",
+            cameras_path, "run the poses stage on the same capture, or pass the capture's ground_truth/cameras.json",
+        )
+    images, masks, valid, Ks, c2ws = [], [], [], [], []
+    for name in names:
+        img = decoded.linear(name)
+        h, w = img.shape[:2]
+        cam = cams[name]
+        sx, sy = w / cam.width, h / cam.height
+        if abs(sx - sy) > 1e-3 * max(sx, sy):
+            raise InputError(f"camera {name} is {cam.width}x{cam.height} but the decoded image is {w}x{h} "
+                             "(different aspect ratio)", cameras_path)
+        mask_path = masks_dir / f"{name}.png"
+        if not mask_path.is_file():
+            raise InputError(f"no mask for image {name}", mask_path, "run the masks stage, or add the missing mask")
+        m = read_image(mask_path)
+        m = m[..., 0] if m.ndim == 3 else m
+        if m.shape != (h, w):
+            import cv2
+
+            m = cv2.resize(m, (w, h), interpolation=cv2.INTER_AREA)
+        thresh = np.iinfo(m.dtype).max / 2 if m.dtype.kind == "u" else 0.5
+        K = cam.K.copy()
+        K[0] *= sx
+        K[1] *= sy
+        images.append(img[..., :3])
+        masks.append(m > thresh)
+        valid.append(~decoded.clipped(name))
+        Ks.append(K)
+        c2ws.append(cam.c2w)
+    if not any(m.any() for m in masks):
+        raise InputError("every mask is empty", masks_dir, "check the masks stage output (the object was not found)")
+    t = lambda a, dt=torch.float32: torch.from_numpy(np.stack(a)).to(dt)  # noqa: E731
+    return ImageSet(t(images), t(masks, torch.bool), t(valid, torch.bool), t(Ks), t(c2ws)), names, load_cameras(cameras_path)
+
+
+# ----------------------------------------------------------------------------------------------- model
+
+
+def model_spec(cfg: TrainConfig):
+    """The ``orca.model.ModelSpec`` a train config describes."""
+    from orca.encoding import HashGridSpec
+    from orca.fields import EnvironmentFieldSpec, SDFFieldSpec
+    from orca.model import ModelSpec
+    from orca.render import RenderSpec
+
+    bound = cfg.scene_radius * 1.05  # the SDF grid must cover the sampled sphere
+    return ModelSpec(
+        sdf=SDFFieldSpec(
+            encoding=cfg.sdf_encoding,
+            hash_grid=HashGridSpec(levels=cfg.grid_levels, log2_table_size=cfg.grid_log2_table,
+                                   max_resolution=cfg.grid_max_resolution),
+            hidden=cfg.sdf_hidden, layers=cfg.sdf_layers, init_radius=cfg.sdf_init_radius, bound=bound,
+        ),
+        env=EnvironmentFieldSpec(
+            encoding=cfg.env_encoding,
+            hash_grid=HashGridSpec(levels=12, log2_table_size=cfg.env_grid_log2_table, base_resolution=16,
+                                   max_resolution=1024),
+            hidden=cfg.env_hidden, layers=cfg.env_layers,
+        ),
+        render=RenderSpec(
+            object_radius=cfg.scene_radius, n_coarse=cfg.n_coarse, n_fine=cfg.n_fine,
+            env_samples=cfg.env_samples, cone_samples=cfg.cone_samples, cone_method=cfg.cone_method, ior=cfg.ior,
+        ),
+        beta_init=cfg.beta_init,
+    )
+
+
+def loss_weights(cfg: TrainConfig):
+    from orca.model import LossWeights
+
+    return LossWeights(**cfg.losses.model_dump())
+
+
+# Config keys that change the network's shape: a checkpoint is only resumable if these match.
+_ARCHITECTURE_KEYS = (
+    "sdf_encoding", "sdf_hidden", "sdf_layers", "grid_levels", "grid_log2_table", "grid_max_resolution",
+    "env_encoding", "env_hidden", "env_layers", "env_grid_log2_table", "scene_radius",
+)
+
+
+def resolve_device(name: str):
+    import torch
+
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name == "cuda" and not torch.cuda.is_available():
+        raise OrcaError("device 'cuda' requested but PyTorch sees no CUDA GPU; use --device cpu or install a CUDA build"
+                        " of torch (see the README)")
+    return torch.device(name)
+
+
+# ---------------------------------------------------------------------------------------- checkpoints
+
+
+def checkpoint_dir_for(out_dir: Path) -> Path:
+    return out_dir.with_name(out_dir.name + CHECKPOINT_SUFFIX)
+
+
+def _checkpoints(folder: Path) -> list[Path]:
+    return sorted(folder.glob("step_*.pt")) if folder.is_dir() else []
+
+
+def save_checkpoint(folder: Path, step: int, model, optimizer, scheduler, cfg: TrainConfig, keep: int) -> Path:
+    import torch
+
+    path = folder / f"step_{step:07d}.pt"
+    state = {
+        "format": CHECKPOINT_FORMAT,
+        "step": step,
+        "model": model.state_dict(),
+        "optimizer": optimizer.state_dict(),
+        "scheduler": scheduler.state_dict(),
+        "config": cfg.model_dump_json(),
+    }
+    with atomic_path(path) as tmp:
+        torch.save(state, tmp)
+    for old in _checkpoints(folder)[:-keep]:
+        old.unlink(missing_ok=True)
+    return path
+
+
+def load_checkpoint(path: Path) -> dict[str, Any]:
+    """Load a checkpoint safely (``weights_only=True``: tensors and plain containers, no code)."""
+    import torch
+
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as e:  # noqa: BLE001 - any unpickling failure means a damaged file
+        raise InputError(f"cannot read checkpoint: {e}", path, "delete it to resume from the one before, "
+                         "or pass --restart") from e
+    if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
+        raise InputError("not an ORCa checkpoint of this version", path, "pass --restart to train from scratch")
+    return state
+
+
+def _check_resumable(state: dict[str, Any], cfg: TrainConfig, path: Path) -> None:
+    saved = json.loads(state["config"])
+    changed = [k for k in _ARCHITECTURE_KEYS if saved.get(k) != getattr(cfg, k)]
+    if changed:
+        raise InputError(
+            f"the checkpoint was trained with a different network ({', '.join(changed)} changed)",
+            path, "pass --restart to train the new network from scratch, or restore the old settings",
+        )
+
+
+# -------------------------------------------------------------------------------------------- previews
+
+
+def _tonemap(x: np.ndarray) -> np.ndarray:
+    from ..imageio import to_srgb8
+
+    return to_srgb8(x)
+
+
+def preview_grid(model, images, K, c2w, downscale: int) -> np.ndarray:
+    """One row of 8-bit pictures: photo | render | diffuse | specular | normals | opacity."""
+    import torch
+
+    from orca.imaging import render_object_image
+
+    h, w = images.shape[:2]
+    hs, ws = h // downscale, w // downscale
+    Ks = K.clone()
+    Ks[:2] /= downscale
+    with torch.no_grad():
+        r = render_object_image(model, Ks, c2w, hs, ws)
+    photo = images[: hs * downscale, : ws * downscale].reshape(hs, downscale, ws, downscale, 3).mean((1, 3))
+    tiles = [
+        _tonemap(photo.cpu().numpy()),
+        _tonemap(r["rgb"].cpu().numpy()),
+        _tonemap(r["diffuse"].cpu().numpy()),
+        _tonemap(r["specular"].cpu().numpy()),
+        np.round((r["normal"].cpu().numpy() * 0.5 + 0.5).clip(0, 1) * 255).astype(np.uint8),
+        np.repeat(np.round(r["opacity"].cpu().numpy().clip(0, 1) * 255).astype(np.uint8)[..., None], 3, -1),
+    ]
+    return np.concatenate(tiles, axis=1)
+
+
+# ------------------------------------------------------------------------------------------- the stage
+
+
+def run_train(
+    decode_dir: Path,
+    cameras_path: Path,
+    masks_dir: Path,
+    out_dir: Path,
+    cfg: TrainConfig,
+    *,
+    restart: bool = False,
+    max_steps: int | None = None,
+) -> TrainResult | None:
+    """Train (or resume training) and write the train folder when the last iteration is done.
+
+    Args:
+        max_steps: stop after this many iterations in this call (checkpointing first) without finishing:
+            returns None. For time-boxed runs and tests of resuming.
+    """
+    import torch
+
+    from orca.model import OrcaModel, objective
+
+    started = time.time()
+    device = resolve_device(cfg.device)
+    torch.manual_seed(cfg.seed)
+    data, names, _ = load_image_set(decode_dir, cameras_path, masks_dir)
+    n_img, height, width = data.shape
+    log.info("train: %d images %dx%d, %d object pixels, device %s, %d iterations", n_img, width, height,
+             int(data.masks.sum()), device, cfg.iterations)
+    data = data.to(device)
+    model = OrcaModel(model_spec(cfg)).to(device)
+    optimizer = torch.optim.Adam(model.parameters(), lr=cfg.lr, eps=1e-15)
+    decay = math.log(cfg.lr_final_ratio) / cfg.iterations
+    scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda it: math.exp(decay * it))
+    weights = loss_weights(cfg)
+
+    ckpt_dir = checkpoint_dir_for(out_dir)
+    if restart and ckpt_dir.exists():
+        shutil.rmtree(ckpt_dir)
+    ckpt_dir.mkdir(parents=True, exist_ok=True)
+    step = 0
+    existing = _checkpoints(ckpt_dir)
+    if existing:
+        state = load_checkpoint(existing[-1])
+        _check_resumable(state, cfg, existing[-1])
+        model.load_state_dict(state["model"])
+        optimizer.load_state_dict(state["optimizer"])
+        scheduler.load_state_dict(state["scheduler"])
+        step = int(state["step"])
+        log.info("resuming from %s (step %d of %d)", existing[-1], step, cfg.iterations)
+    # The sampler is reseeded from the step so a resumed run draws the batches an uninterrupted one would.
+    generator = torch.Generator().manual_seed(cfg.seed * 1_000_003 + step)
+
+    from torch.utils.tensorboard import SummaryWriter
+
+    from ..imageio import write_png
+    from ..log import progress
+
+    writer = SummaryWriter(str(ckpt_dir / "tb"))
+    metrics_path = ckpt_dir / "metrics.jsonl"
+    previews = ckpt_dir / "previews"
+    stop_at = cfg.iterations if max_steps is None else min(cfg.iterations, step + max_steps)
+    terms: dict[str, torch.Tensor] = {}
+    t0 = time.time()
+    first_step = step
+    try:
+        with progress() as bar, open(metrics_path, "a", encoding="utf-8") as metrics:
+            task = bar.add_task("train", total=cfg.iterations, completed=step)
+            while step < stop_at:
+                phase = "mask" if step < cfg.mask_warmup else "joint"
+                batch = data.sample(cfg.batch_rays, cfg.object_fraction, generator)
+                total, terms, out = objective(model, batch, weights, phase)
+                if not torch.isfinite(total):
+                    bad = ", ".join(k for k, v in terms.items() if not torch.isfinite(v)) or "total"
+                    raise TrainingDiverged(
+                        f"training diverged at step {step}: {bad} is NaN/Inf. Nothing was written for this step; "
+                        f"the last good checkpoint is in {ckpt_dir}. Fix: lower train.lr (now {cfg.lr}) or "
+                        "train.grad_clip, check the decoded images for NaNs, then rerun to resume."
+                    )
+                optimizer.zero_grad(set_to_none=True)
+                total.backward()
+                grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+                if not torch.isfinite(grad_norm):
+                    raise TrainingDiverged(
+                        f"gradients became NaN/Inf at step {step}; the last good checkpoint is in {ckpt_dir}. "
+                        "Fix: lower train.lr or train.grad_clip and rerun to resume."
+                    )
+                optimizer.step()
+                scheduler.step()
+                step += 1
+                if step % cfg.log_every == 0 or step == stop_at:
+                    obj = batch.mask > 0.5
+                    mse = ((out.rgb - batch.rgb)[obj].square().mean()).item() if obj.any() else float("nan")
+                    psnr = -10 * math.log10(max(mse, 1e-12)) if mse == mse else float("nan")
+                    row = {"step": step, "phase": phase, "loss": total.item(), "psnr_object": psnr,
+                           "beta": model.beta.item(), "lr": scheduler.get_last_lr()[0],
+                           **{k: v.item() for k, v in terms.items()}}
+                    metrics.write(json.dumps(row) + "\n")
+                    metrics.flush()
+                    for k, v in row.items():
+                        if isinstance(v, float):
+                            writer.add_scalar(k, v, step)
+                    bar.update(task, completed=step, description=f"train {phase} loss {total.item():.4f} "
+                               f"PSNR {psnr:.1f}")
+                if step % cfg.checkpoint_every == 0 or step == stop_at:
+                    save_checkpoint(ckpt_dir, step, model, optimizer, scheduler, cfg, cfg.keep_checkpoints)
+                if step % cfg.preview_every == 0 or step == cfg.iterations:
+                    grid = preview_grid(model, data.images[0], data.K[0], data.c2w[0], cfg.preview_downscale)
+                    write_png(previews / f"step_{step:07d}.png", grid)
+                    writer.add_image("preview", grid, step, dataformats="HWC")
+    except KeyboardInterrupt:
+        save_checkpoint(ckpt_dir, step, model, optimizer, scheduler, cfg, cfg.keep_checkpoints)
+        log.warning("interrupted at step %d; checkpoint saved in %s; rerun to resume", step, ckpt_dir)
+        raise
+    finally:
+        writer.close()
+    seconds = time.time() - t0
+    log.info("train: steps %d-%d in %.1f s (%.2f it/s)", first_step, step, seconds,
+             (step - first_step) / max(seconds, 1e-9))
+    if step < cfg.iterations:
+        return None
+
+    final_losses = {k: float(v) for k, v in terms.items()}
+    with atomic_dir(out_dir) as tmp:
+        torch.save({"format": CHECKPOINT_FORMAT, "step": step, "model": model.state_dict(),
+                    "config": cfg.model_dump_json()}, tmp / FINAL_WEIGHTS)
+        (tmp / "config.json").write_text(cfg.model_dump_json(indent=2) + "\n", encoding="utf-8")
+        shutil.copy2(metrics_path, tmp / "metrics.jsonl")
+        if previews.is_dir():
+            shutil.copytree(previews, tmp / "previews")
+        shutil.copytree(ckpt_dir / "tb", tmp / "tensorboard")
+        write_json(tmp / "train_report.json", {
+            "iterations": step, "images": names, "size": [width, height], "device": str(device),
+            "seconds_this_run": round(seconds, 2), "final_losses": final_losses, "beta": model.beta.item(),
+        })
+        write_manifest(tmp, stage="train", inputs={"cameras": cameras_path, "decode": decode_dir / "decode.json"},
+                       config=cfg.model_dump(), started=started)
+    log.info("train: wrote %s", out_dir)
+    return TrainResult(out_dir, step, time.time() - started, final_losses)
+
+
+def load_model(train_dir: Path, device: str = "cpu"):
+    """The trained model of a train folder (safe loading), in eval mode."""
+    from orca.model import OrcaModel
+
+    path = Path(train_dir) / FINAL_WEIGHTS
+    if not path.is_file():
+        raise InputError("no trained model here", path, "run `orca train` first")
+    state = load_checkpoint(path)
+    cfg = TrainConfig.model_validate_json(state["config"])
+    model = OrcaModel(model_spec(cfg))
+    model.load_state_dict(state["model"])
+    return model.to(device).eval()
+
+
+# ------------------------------------------------------------------------------------------------- CLI
+
+EPILOG = """\
+examples:
+  orca train --ground-truth captures/demo/ground_truth --decode results/demo/decode --preset fast
+        train from a synthetic capture's ground-truth cameras and masks
+  orca train --decode results/mug/decode --cameras results/mug/poses/cameras.json \\
+             --masks results/mug/masks/masks --out results/mug/train
+  orca train ... --set iterations=500 --device cpu     a short CPU run
+  orca train ... --restart                             ignore checkpoints and start over
+
+Training resumes from the last checkpoint in <out>.checkpoints/ unless --restart is given; Ctrl-C saves a
+checkpoint first. Watch it live with: tensorboard --logdir <out>.checkpoints/tb
+"""
+
+
+def register(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "train", help="decoded photos + cameras + masks -> trained ORCa model (SDF + environment field)",
+        description="Train the ORCa model: neural SDF with diffuse head, virtual cones, 5D environment field.",
+        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--decode", type=Path, required=True, help="decode stage folder")
+    p.add_argument("--cameras", type=Path, default=None, help="cameras.json (poses stage or ground truth)")
+    p.add_argument("--masks", type=Path, default=None, help="folder of <image name>.png object masks")
+    p.add_argument("--ground-truth", type=Path, default=None,
+                   help="a synthetic capture's ground_truth/ folder: its cameras.json and masks/ are used")
+    p.add_argument("--out", type=Path, default=None, help="output folder (default: beside --decode, train/)")
+    p.add_argument("--device", choices=["auto", "cpu", "cuda"], default=None, help="overrides train.device")
+    p.add_argument("--restart", action="store_true", help="discard checkpoints and train from scratch")
+    add_config_arguments(p)
+    p.set_defaults(func=main)
+
+
+def main(args: argparse.Namespace) -> TrainResult | None:
+    if args.ground_truth is not None:
+        cameras = args.cameras or args.ground_truth / "cameras.json"
+        masks = args.masks or args.ground_truth / "masks"
+    else:
+        cameras, masks = args.cameras, args.masks
+    if cameras is None or masks is None:
+        raise InputError("train needs cameras and masks: pass --cameras and --masks, or --ground-truth")
+    config = config_from_arguments(args, "train")
+    cfg = config.train if args.device is None else config.train.model_copy(update={"device": args.device})
+    out = args.out if args.out is not None else Path(args.decode).parent / "train"
+    return run_train(Path(args.decode), Path(cameras), Path(masks), out, cfg, restart=args.restart)

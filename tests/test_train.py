@@ -1,0 +1,104 @@
+"""The train stage on a tiny synthetic capture: interrupted + resumed training continues where it stopped,
+safe checkpoints, a clear stop on NaNs, and the final artifact only once training is complete."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from pipeline.config import load_config
+from pipeline.errors import InputError
+from pipeline.stages.train import (
+    TrainingDiverged,
+    checkpoint_dir_for,
+    load_checkpoint,
+    load_model,
+    run_train,
+)
+
+# A few steps of a very small model: what is tested is the bookkeeping, not the quality.
+TINY = [
+    "train.iterations=6", "train.batch_rays=64", "train.mask_warmup=2", "train.checkpoint_every=2",
+    "train.preview_every=6", "train.preview_downscale=4", "train.log_every=1", "train.n_coarse=8",
+    "train.n_fine=4", "train.env_samples=6", "train.grid_levels=4", "train.grid_log2_table=10",
+    "train.env_grid_log2_table=10", "train.sdf_hidden=16", "train.env_hidden=16", "train.device=cpu",
+]
+
+
+def _cfg(*extra):
+    return load_config(preset="fast", overrides=[*TINY, *extra]).train
+
+
+def test_interrupted_training_resumes_from_its_checkpoint(tiny_capture, tiny_decode, tmp_path):
+    gt = tiny_capture / "ground_truth"
+    out = tmp_path / "train"
+    cfg = _cfg()
+    assert run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, cfg, max_steps=4) is None
+    assert not out.exists(), "no final artifact before training is complete"
+    ckpts = sorted(checkpoint_dir_for(out).glob("step_*.pt"))
+    assert ckpts[-1].name == "step_0000004.pt"
+    result = run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, cfg)
+    assert result is not None and result.iterations == 6
+    steps = [json.loads(line)["step"] for line in (out / "metrics.jsonl").read_text().splitlines()]
+    assert steps == [1, 2, 3, 4, 5, 6], "the resumed run continued at step 5, it did not restart from zero"
+    assert (out / "model.pt").is_file() and (out / "manifest.json").is_file()
+    assert list((out / "previews").glob("*.png")) and (out / "train_report.json").is_file()
+    state = load_checkpoint(out / "model.pt")
+    assert state["step"] == 6
+    model = load_model(out)
+    assert model.beta.item() > 0
+
+
+def test_changed_network_is_not_resumed_silently(tiny_capture, tiny_decode, tmp_path):
+    gt = tiny_capture / "ground_truth"
+    out = tmp_path / "train"
+    run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, _cfg(), max_steps=2)
+    with pytest.raises(InputError, match="sdf_hidden"):
+        run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, _cfg("train.sdf_hidden=32"), max_steps=2)
+    # --restart discards the old checkpoints and trains the new network
+    assert run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, _cfg("train.sdf_hidden=32"),
+                     restart=True, max_steps=2) is None
+
+
+def test_damaged_checkpoint_names_the_file(tmp_path):
+    bad = tmp_path / "step_0000002.pt"
+    bad.write_bytes(b"not a checkpoint")
+    with pytest.raises(InputError, match="step_0000002.pt"):
+        load_checkpoint(bad)
+
+
+def test_nan_in_training_stops_with_a_clear_message(tiny_capture, tiny_decode, tmp_path, monkeypatch):
+    from orca import data as data_module
+
+    original = data_module.ImageSet.sample
+
+    def poisoned(self, *args, **kwargs):
+        batch = original(self, *args, **kwargs)
+        return batch._replace(rgb=torch.full_like(batch.rgb, float("nan")))  # e.g. a NaN in a decoded image
+
+    monkeypatch.setattr(data_module.ImageSet, "sample", poisoned)
+    gt = tiny_capture / "ground_truth"
+    out = tmp_path / "train"
+    with pytest.raises(TrainingDiverged, match="NaN"):
+        run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, _cfg("train.mask_warmup=0"))
+    assert not out.exists()
+    assert not list(checkpoint_dir_for(out).glob("step_*.pt")), "no checkpoint of a diverged step"
+
+
+def test_missing_masks_are_named(tiny_capture, tiny_decode, tmp_path):
+    gt = tiny_capture / "ground_truth"
+    with pytest.raises(InputError, match="no mask"):
+        run_train(tiny_decode, gt / "cameras.json", tmp_path, tmp_path / "train", _cfg())
+
+
+def test_training_lowers_the_loss_on_the_tiny_capture(tiny_capture, tiny_decode, tmp_path):
+    gt = tiny_capture / "ground_truth"
+    out = tmp_path / "train"
+    cfg = _cfg("train.iterations=40", "train.mask_warmup=20", "train.checkpoint_every=40", "train.preview_every=40")
+    run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, cfg)
+    rows = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
+    mask = np.array([r["mask"] for r in rows])
+    assert mask[15:20].mean() < 0.7 * mask[:5].mean(), "the silhouette warm-up lowers the mask loss"
