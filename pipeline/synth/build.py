@@ -32,6 +32,9 @@ from .textures import poster
 Variant = Literal["full", "diffuse", "specular", "coverage", "environment"]
 OBJECT_ID = "object"
 
+# Diffuse reflectance left in the specular-only variant (see object_bsdf).
+SPECULAR_ONLY_DIFFUSE = 1e-6
+
 # OpenCV camera axes (x right, y down, z forward) -> Mitsuba's (x left, y up, z forward).
 CV_TO_MITSUBA = np.diag([-1.0, -1.0, 1.0, 1.0])
 
@@ -172,7 +175,11 @@ def object_bsdf(scene: ResolvedScene, assets: SceneAssets, variant: Variant) -> 
     if variant == "diffuse":
         bsdf["specular_reflectance"] = {"type": "rgb", "value": [0.0, 0.0, 0.0]}
     elif variant == "specular":
-        bsdf["diffuse_reflectance"] = {"type": "rgb", "value": [0.0, 0.0, 0.0]}
+        # Not exactly 0: plastic's lobe-selection probability is F w / (F w + (1 - F)(1 - w)) with
+        # w = s / (s + d), which is 0/0 = NaN for d = 0 where F vanishes (seen as NaN pixels). 1e-6 of diffuse
+        # reflectance adds ~1e-5 of the diffuse image to the specular one, far below the Monte Carlo noise.
+        eps = SPECULAR_ONLY_DIFFUSE
+        bsdf["diffuse_reflectance"] = {"type": "rgb", "value": [eps, eps, eps]}
     return bsdf
 
 
@@ -305,6 +312,20 @@ def sensor(
         "type": "perspective", "fov": fov_x, "fov_axis": "x", "near_clip": near_clip, "far_clip": far_clip,
         "to_world": mi.ScalarTransform4f(to_world.tolist()), "film": film, "sampler": smp,
     })
+
+
+def effective_spp(sampler: str, spp: int) -> int:
+    """The sample count Mitsuba really uses for ``sampler`` (stratified rounds up to a square, multijitter to a
+    product of two near-equal factors), found without the warning it prints on each rounding."""
+    if sampler in ("independent", "centre"):
+        return int(spp) if sampler == "independent" else 1
+    mi = mitsuba()
+    level = mi.logger().log_level()
+    mi.set_log_level(mi.LogLevel.Error)
+    try:
+        return int(mi.load_dict({"type": sampler, "sample_count": int(spp)}).sample_count())
+    finally:
+        mi.set_log_level(level)
 
 
 def render(scene, sensor_obj, *, integrator=None, seed: int = 0) -> np.ndarray:

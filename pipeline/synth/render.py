@@ -89,9 +89,9 @@ class ExposureSpec:
 class SynthOptions:
     """What to render. Defaults: the demo capture's settings."""
 
-    views: int = 36
-    width: int = 400
-    height: int = 300
+    views: int = 32
+    width: int = 320
+    height: int = 240
     spp: int = 64  # samples per pixel of the photos and of the diffuse/specular ground truth
     format: PhotoFormat = "dng"
     seed: int = 0
@@ -173,7 +173,8 @@ class _Renderer:
         self.env_aov = build.aov_integrator("pp:position,si:shape_index")
 
     def _sensor(self, v: PinholeView, spp: int, sampler: str, crop: build.Crop | None = None):
-        return build.sensor(v.c2w, v.width, v.height, v.fx, spp=spp, sampler=sampler, crop=crop)
+        return build.sensor(v.c2w, v.width, v.height, v.fx, spp=build.effective_spp(sampler, spp), sampler=sampler,
+                            crop=crop)
 
     def view(self, v: PinholeView, seed: int) -> ViewTruth:
         o = self.options
@@ -192,7 +193,8 @@ class _Renderer:
                            integrator=self.coverage_aov, seed=seed)[..., 0]
         cov = np.clip(cov, 0.0, 1.0)
 
-        linear = build.render(self.full, self._sensor(v, o.spp, o.sampler), seed=seed)
+        linear = _repair_non_finite(build.render(self.full, self._sensor(v, o.spp, o.sampler), seed=seed),
+                                    f"{v.name} (full render)")
         diffuse = np.zeros_like(linear)
         specular = np.zeros_like(linear)
         crop = _crop_of(cov > 0)
@@ -200,8 +202,10 @@ class _Renderer:
             # Only the object's pixels matter: render the two lobes in its bounding box (a fraction of the cost).
             # Same sampler seed as the full render, so each pixel starts from the same random numbers.
             sl = (slice(crop.y0, crop.y0 + crop.height), slice(crop.x0, crop.x0 + crop.width))
-            diffuse[sl] = build.render(self.diffuse, self._sensor(v, o.spp, o.sampler, crop), seed=seed)
-            specular[sl] = build.render(self.specular, self._sensor(v, o.spp, o.sampler, crop), seed=seed)
+            diffuse[sl] = _repair_non_finite(build.render(
+                self.diffuse, self._sensor(v, o.spp, o.sampler, crop), seed=seed), f"{v.name} (diffuse)")
+            specular[sl] = _repair_non_finite(build.render(
+                self.specular, self._sensor(v, o.spp, o.sampler, crop), seed=seed), f"{v.name} (specular)")
             outside = (cov <= 0)[..., None]
             diffuse = np.where(outside, 0.0, diffuse).astype(np.float32)
             specular = np.where(outside, 0.0, specular).astype(np.float32)
@@ -211,7 +215,8 @@ class _Renderer:
     def environment(self, v: PinholeView, seed: int) -> tuple[np.ndarray, np.ndarray]:
         """Linear RGB ``(S, S, 3)`` and z-depth ``(S, S)`` of the room without the object."""
         spp = self.options.env_spp or self.options.spp
-        rgb = build.render(self.env, self._sensor(v, spp, self.options.sampler), seed=seed)
+        rgb = _repair_non_finite(build.render(self.env, self._sensor(v, spp, self.options.sampler), seed=seed),
+                                 f"{v.name} (environment)")
         g = build.render(self.env, self._sensor(v, 1, "centre"), integrator=self.env_aov)
         hit = np.rint(g[..., 3]) > 0
         depth = np.where(hit, _z_depth(g[..., 0:3], v.c2w), np.inf).astype(np.float32)
@@ -224,6 +229,24 @@ class _Renderer:
         inside = r < radius * (1 - 1e-3)  # only the object and the floor under it can be hit in there
         if np.any(r[object_hit] > radius * (1 + 1e-3)) or (inside.any() and not object_hit.any()):
             raise RuntimeError("shape index of the object does not match the geometry (Mitsuba shape order?)")
+
+
+def _repair_non_finite(img: np.ndarray, what: str) -> np.ndarray:
+    """Replace pixels holding NaN/inf (a Monte Carlo sample gone wrong inside Mitsuba; rare) by the mean of
+    their finite 3x3 neighbours, with a warning: one bad sample must not cost a whole capture (the DNG
+    writer rejects non-finite input)."""
+    bad = ~np.isfinite(img).all(axis=-1)
+    if not bad.any():
+        return img
+    log.warning("%s: %d pixel(s) with NaN/inf from the renderer, replaced by their neighbours' mean",
+                what, int(bad.sum()))
+    out = img.copy()
+    h, w = bad.shape
+    for i, j in np.argwhere(bad):
+        win = img[max(0, i - 1):i + 2, max(0, j - 1):j + 2].reshape(-1, img.shape[-1])
+        ok = np.isfinite(win).all(axis=-1)
+        out[i, j] = win[ok].mean(axis=0) if ok.any() else 0.0
+    return out
 
 
 def _z_depth(position: np.ndarray, c2w: np.ndarray) -> np.ndarray:
@@ -501,8 +524,10 @@ def _scene_json(scene: ResolvedScene, options: SynthOptions, photos: list[dict],
         "photos": photos,
         "render": {
             "renderer": f"mitsuba {mitsuba_version} scalar_rgb", "integrator": "path",
-            "max_depth": spec.max_depth, "spp": options.spp, "sampler": options.sampler,
-            "coverage_spp": options.coverage_spp, "env_spp": options.env_spp or options.spp,
+            "max_depth": spec.max_depth, "spp": build.effective_spp(options.sampler, options.spp),
+            "sampler": options.sampler,
+            "coverage_spp": build.effective_spp("stratified", options.coverage_spp),
+            "env_spp": build.effective_spp(options.sampler, options.env_spp or options.spp),
             "seed": options.seed, "width": options.width, "height": options.height,
         },
         "ground_truth": {
@@ -510,7 +535,8 @@ def _scene_json(scene: ResolvedScene, options: SynthOptions, photos: list[dict],
                      "through the pixel centre does not hit the object first (environment: +inf for no hit)",
             "normals": "world-space unit shading normals at the pixel-centre hit; 0 where it is not the object",
             "masks": "0/255; 255 where the occlusion-aware object coverage (fraction of the pixel's "
-                     f"{options.coverage_spp} samples whose first hit is the object) is >= 0.5",
+                     f"{build.effective_spp('stratified', options.coverage_spp)} samples whose first hit is the "
+                     "object) is >= 0.5",
             "diffuse_specular": "renders with the specular / diffuse lobe off (plastic, nonlinear=false); values on "
                                 "pixels with coverage > 0, else 0. diffuse + specular = linear on interior object "
                                 "pixels (coverage 255) up to Monte Carlo noise and paths meeting the object more "

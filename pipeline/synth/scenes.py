@@ -23,6 +23,13 @@ from .textures import PosterStyle
 Vec3 = tuple[float, float, float]
 
 
+# Saturated, mid-to-light colours (no near-black): mapped into the object's dark reflectance range they
+# still read as colours under the reflections.
+OBJECT_PALETTE: tuple[tuple[int, int, int], ...] = (
+    (220, 40, 40), (250, 200, 30), (30, 90, 200), (40, 160, 70), (240, 120, 30), (40, 190, 200), (245, 243, 235),
+)
+
+
 @dataclass(frozen=True)
 class AlbedoSpec:
     """The object's diffuse colour: a uniform linear RGB, or a poster texture (``texture=True``)."""
@@ -30,8 +37,10 @@ class AlbedoSpec:
     rgb: Vec3 = (0.2, 0.2, 0.2)
     texture: bool = False
     texture_size: tuple[int, int] = (1024, 512)  # (width, height) of the UV texture
-    # Dark diffuse range, so the (few percent) specular reflection stays visible on top of it.
-    style: PosterStyle = PosterStyle(reflectance=(0.02, 0.25), shapes_per_megapixel=250.0, min_scale=0.02)
+    # Dark, calm diffuse pattern (few large shapes, no letters), so the coat's ~10 % reflection of the room
+    # stands out on top of it instead of drowning in texture.
+    style: PosterStyle = PosterStyle(reflectance=(0.01, 0.12), shapes_per_megapixel=50.0, min_scale=0.06,
+                                     max_scale=0.6, glyph_weight=0.0, palette=OBJECT_PALETTE)
 
 
 @dataclass(frozen=True)
@@ -41,7 +50,7 @@ class ObjectSpec:
     kind: Literal["sphere", "torus", "blob"]
     radius: float = 1.0  # bounding-sphere radius, centred at the origin
     albedo: AlbedoSpec = AlbedoSpec()
-    int_ior: float = 1.8  # coat IOR; 1.8 reflects ~8 % at normal incidence (more at grazing)
+    int_ior: float = 1.9  # coat IOR (a glaze / lacquer): ~10 % reflected at normal incidence, more at grazing
     roughness: float | None = None  # None: smooth `plastic`; else `roughplastic` (GGX alpha)
     # torus: tube centre-line radius and tube radius, as fractions of `radius` (major + minor = 1)
     torus_major: float = 0.68

@@ -76,6 +76,7 @@ def poster(width: int, height: int, seed: int, style: PosterStyle = PosterStyle(
     scales = np.exp(rng.uniform(np.log(style.min_scale), np.log(style.max_scale), size=n)) * side
     scales = np.sort(scales)[::-1]
     weights = np.ones(len(SHAPE_KINDS))
+    # glyph_weight is the glyphs' share of all shapes; the other kinds share the rest equally.
     weights[SHAPE_KINDS.index("glyphs")] = style.glyph_weight * (len(SHAPE_KINDS) - 1) / (1 - style.glyph_weight)
     kinds = rng.choice(len(SHAPE_KINDS), size=n, p=weights / weights.sum())
     for size, kind in zip(scales, kinds):
