@@ -9,7 +9,12 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
+
+# LibRaw (rawpy) and torch each bring an OpenMP runtime; spin-waiting threads of one starve the other when
+# a process loads both. Set before either library is imported.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 from . import __version__
 from .errors import OrcaError

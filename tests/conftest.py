@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
+import os
+
+# LibRaw (rawpy) and torch each bring an OpenMP runtime; with the default spin-waiting, the two fight over
+# the cores once both are loaded in one process (a torch test ran 3x slower after the decode tests).
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+from dataclasses import replace  # noqa: E402
 from pathlib import Path
 
 import pytest
@@ -32,3 +38,15 @@ def tiny_decode(tiny_capture, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("tiny_results") / "decode"
     run_decode(tiny_capture, out, DecodeConfig())
     return out
+
+
+@pytest.fixture
+def float64():
+    """Run a test with float64 as torch's default dtype, restoring the previous default afterwards
+    (a module-level ``set_default_dtype`` would leak into every test collected after it)."""
+    import torch
+
+    old = torch.get_default_dtype()
+    torch.set_default_dtype(torch.float64)
+    yield
+    torch.set_default_dtype(old)

@@ -7,7 +7,7 @@ import torch
 
 from orca.differential import normals_and_curvature_autograd, normals_and_curvature_fd
 
-torch.set_default_dtype(torch.float64)
+pytestmark = pytest.mark.usefixtures("float64")
 
 
 def sphere(radius: float):

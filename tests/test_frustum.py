@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import math
 
+import pytest
 import torch
 
 from orca.frustum import conical_frustum_gaussian, contract, contract_gaussian
 
-torch.set_default_dtype(torch.float64)
+pytestmark = pytest.mark.usefixtures("float64")
 
 
 def _sample_frustum(o, d, r, t0, t1, n, g):

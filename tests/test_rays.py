@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
 
 from orca.rays import PIXEL_RADIUS_FACTOR, camera_rays, pixel_centers
 from pipeline.cameras import look_at
 
-torch.set_default_dtype(torch.float64)
+pytestmark = pytest.mark.usefixtures("float64")
 
 
 def test_pixel_centres_follow_colmap():

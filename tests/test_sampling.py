@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import pytest
 import torch
 
 from orca.sampling import ray_sphere_bounds, sample_pdf, upsample_to_surface
 
-torch.set_default_dtype(torch.float64)
+pytestmark = pytest.mark.usefixtures("float64")
 
 
 def test_ray_sphere_bounds_hit_miss_and_inside():

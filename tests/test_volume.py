@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import pytest
 import torch
 
 from orca.volume import composite_weights, distortion_loss, laplace_cdf, volsdf_density
 
-torch.set_default_dtype(torch.float64)
+pytestmark = pytest.mark.usefixtures("float64")
 
 
 def test_laplace_cdf_limits_symmetry_and_no_overflow():
