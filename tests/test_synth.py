@@ -241,7 +241,10 @@ def test_diffuse_plus_specular_is_full_render(sphere_capture: Path):
         assert m.sum() > 300
         scale = full[m].mean()
         residual = abs((full[m] - dif[m] - spec[m]).mean()) / scale
-        assert residual < 0.03, residual  # measured ~0.2-1 % here; the lobes alone are off by 40-60 %
+        print(f"{cam.name}: |mean(full - diffuse - specular)| / mean(full) = {residual:.4f} over {m.sum()} px; "
+              f"diffuse alone off by {abs((full[m] - dif[m]).mean()) / scale:.2f}, "
+              f"specular alone by {abs((full[m] - spec[m]).mean()) / scale:.2f}")
+        assert residual < 0.03, residual  # measured 0.1-1 % here; each lobe alone is off by 20-80 %
         assert abs((full[m] - dif[m]).mean()) / scale > 0.2
         assert abs((full[m] - spec[m]).mean()) / scale > 0.2
         assert np.all(dif[cov == 0] == 0) and np.all(spec[cov == 0] == 0)
@@ -305,15 +308,21 @@ def test_photos_exposure_and_radiance_factor(sphere_capture: Path):
     ref = photos[0]
     linear = read_exr(gt / "linear" / "IMG_0001.exr")
     with rawpy.imread(str(sphere_capture / ref["image"])) as raw:
+        # adjust_maximum_thr=0: LibRaw would otherwise lower the white level to the image's maximum when
+        # nothing clips, brightening the output (the decode stage turns it off too).
         dec = raw.postprocess(gamma=(1, 1), no_auto_bright=True, output_bps=16, use_camera_wb=True,
-                              user_flip=0, output_color=rawpy.ColorSpace.sRGB).astype(np.float64) / 65535
-    ok = (linear.max(-1) * factor < 0.7) & (linear.min(-1) * factor > 0.02)
+                              user_flip=0, output_color=rawpy.ColorSpace.sRGB,
+                              adjust_maximum_thr=0.0).astype(np.float64) / 65535
+    # Compare means over everything but the (dilated) near-clipping regions: demosaicing moves values between
+    # neighbours, so a per-pixel selection by value would bias the comparison.
+    ok = ~_dilate(_dilate(_dilate((linear * factor).max(-1) > 0.6)))
     ratio = dec[ok].mean(0) / (factor * linear[ok].mean(0))
-    np.testing.assert_allclose(ratio, 1.0, atol=0.06)
+    np.testing.assert_allclose(ratio, 1.0, atol=0.03)
     # the JPEG of the same view: sRGB of decoded_from_linear @ linear (per-view exposure, not normalized)
     jpg = srgb_to_linear(read_image(sphere_capture / "IMG_0001.jpg") / 255.0).astype(np.float64)
     jratio = jpg[ok].mean(0) / (factor * linear[ok].mean(0))
-    np.testing.assert_allclose(jratio, 1.0, atol=0.06)
+    print("decoded / (factor x linear): DNG", ratio, "JPEG", jratio)
+    np.testing.assert_allclose(jratio, 1.0, atol=0.03)
 
 
 def _distance_to_surface(spec: SceneSpec, p: np.ndarray) -> np.ndarray:

@@ -39,7 +39,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--spp", type=int, default=d.spp, help=f"samples per pixel (default {d.spp})")
     p.add_argument("--format", choices=("dng", "jpg", "both"), default=d.format, help="photo format (default dng)")
     p.add_argument("--seed", type=int, default=d.seed, help="camera path, exposure and noise seed (default 0)")
-    p.add_argument("--env-size", type=int, default=d.env_size,
+    p.add_argument("--env-size", type=int, default=d.env_size, metavar="N",
                    help=f"environment ground-truth views are N x N (default {d.env_size})")
     p.add_argument("--env-spp", type=int, default=None, help="samples per pixel of environment views (default: --spp)")
     p.add_argument("--overwrite", action="store_true", help="replace OUT_DIR if it exists")

@@ -548,8 +548,8 @@ def _scene_json(scene: ResolvedScene, options: SynthOptions, photos: list[dict],
         "decomposition_residual": {
             "relative_mean": {"max": max(rel), "mean": float(np.mean(rel))},
             "relative_rmse": {"max": max(rmse), "mean": float(np.mean(rmse))},
-            "definition": "over mask pixels: |mean(linear - diffuse - specular)| / mean(linear), and the "
-                          "per-pixel RMS of the same difference / mean(linear)",
+            "definition": "over interior object pixels (coverage 255): |mean(linear - diffuse - specular)| / "
+                          "mean(linear), and the per-pixel RMS of the same difference / mean(linear)",
         },
         "environment": {
             "cameras": "environment/cameras.json",
