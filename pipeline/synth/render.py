@@ -505,7 +505,9 @@ def _scene_json(scene: ResolvedScene, options: SynthOptions, photos: list[dict],
             "material": {"type": "plastic" if obj.roughness is None else "roughplastic", "int_ior": obj.int_ior,
                          "ext_ior": 1.0, "roughness": obj.roughness, "nonlinear": False},
             "albedo": "object_albedo.png" if obj.albedo.texture else list(obj.albedo.rgb),
-            "albedo_uv": "mesh u, v; Mitsuba's sphere UV (u = longitude / 2 pi, v = polar angle / pi) for the sphere",
+            "albedo_uv": "texel (row, column) = (v * height, u * width) of object_albedo.png (v = 0: top row), "
+                         "(u, v) from object.ply; for the sphere also Mitsuba's analytic sphere UV: u = longitude "
+                         "/ 2 pi (atan2(y, x)), v = polar angle from +z / pi",
         },
         "floor_z": scene.floor_z,
         "room": {"min": scene.room_min.tolist(), "max": scene.room_max.tolist()},
