@@ -32,7 +32,9 @@ if PRESET not in PRESETS:
 
 for name in CAPTURES:
     if not (CAPTURES_DIR / name).is_dir():
-        raise ValueError(f"capture folder {CAPTURES_DIR / name} does not exist (config 'captures')")
+        hint = (" The demo capture is rendered on first use: run scripts/demo.sh, or `orca synth sphere "
+                f"{CAPTURES_DIR / name}`." if name == "demo" else "")
+        raise ValueError(f"capture folder {CAPTURES_DIR / name} does not exist (config 'captures').{hint}")
 
 
 def capture_config(wildcards):
