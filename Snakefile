@@ -11,10 +11,15 @@ Config keys (all optional): captures (list of folder names under captures_dir), 
 preset (fast | standard | paper).
 """
 
+import shlex
+import sys
 from pathlib import Path
 
 from pipeline.config import PRESETS
 from pipeline.stages.decode import find_photos
+
+# The `orca` CLI of the environment Snakemake itself runs in (no need for it to be on PATH).
+ORCA = f"{shlex.quote(sys.executable)} -m pipeline.cli"
 
 KNOWN_KEYS = {"captures", "captures_dir", "results_dir", "preset"}
 unknown = set(config) - KNOWN_KEYS
@@ -58,4 +63,4 @@ rule decode:
     log:
         RESULTS_DIR / "{capture}" / "logs" / "decode.log",
     shell:
-        "orca decode {CAPTURES_DIR}/{wildcards.capture} --out {output} --preset {PRESET} > {log} 2>&1"
+        "{ORCA} decode {CAPTURES_DIR}/{wildcards.capture} --out {output} --preset {PRESET} > {log} 2>&1"
