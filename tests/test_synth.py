@@ -10,6 +10,7 @@ import argparse
 from dataclasses import replace
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -237,17 +238,22 @@ def test_diffuse_plus_specular_is_full_render(sphere_capture: Path):
         dif = read_exr(gt / "diffuse" / f"{cam.name}.exr").astype(np.float64)
         spec = read_exr(gt / "specular" / f"{cam.name}.exr").astype(np.float64)
         cov = read_image(gt / "coverage" / f"{cam.name}.png")
-        m = cov == 255
-        assert m.sum() > 300
+        m = synth_render.interior_mask(cov / 255.0, SPHERE_OPTIONS.optics_blur_px)
+        assert m.sum() > 200  # enough pixels for the mean residual (interior shrunk by the blur footprint)
         scale = full[m].mean()
         residual = abs((full[m] - dif[m] - spec[m]).mean()) / scale
         print(f"{cam.name}: |mean(full - diffuse - specular)| / mean(full) = {residual:.4f} over {m.sum()} px; "
               f"diffuse alone off by {abs((full[m] - dif[m]).mean()) / scale:.2f}, "
               f"specular alone by {abs((full[m] - spec[m]).mean()) / scale:.2f}")
-        assert residual < 0.03, residual  # measured 0.1-1 % here; each lobe alone is off by 20-80 %
-        assert abs((full[m] - dif[m]).mean()) / scale > 0.2
-        assert abs((full[m] - spec[m]).mean()) / scale > 0.2
-        assert np.all(dif[cov == 0] == 0) and np.all(spec[cov == 0] == 0)
+        assert residual < 0.03, residual  # measured 0.2-2.2 % (Monte Carlo noise, same with and without blur)
+        # Each lobe's share must dwarf the 3 % tolerance so that a missing lobe fails the sum above (the dark
+        # object's diffuse share is ~15 % away from the Fresnel-bright rim).
+        assert abs((full[m] - dif[m]).mean()) / scale > 0.1
+        assert abs((full[m] - spec[m]).mean()) / scale > 0.1
+        # the lobes live on the object, spread only by the optics blur
+        r = synth_render.blur_radius(SPHERE_OPTIONS.optics_blur_px)
+        near = cv2.dilate((cov > 0).astype(np.uint8), np.ones((2 * r + 1, 2 * r + 1), np.uint8)) > 0
+        assert np.all(dif[~near] == 0) and np.all(spec[~near] == 0)
     summary = read_json(gt / "scene.json")["decomposition_residual"]
     assert summary["relative_mean"]["max"] < 0.03
 

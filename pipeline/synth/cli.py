@@ -42,6 +42,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--env-size", type=int, default=d.env_size, metavar="N",
                    help=f"environment ground-truth views are N x N (default {d.env_size})")
     p.add_argument("--env-spp", type=int, default=None, help="samples per pixel of environment views (default: --spp)")
+    p.add_argument("--optics-blur", type=float, default=d.optics_blur_px, metavar="SIGMA",
+                   help=f"lens + optical low-pass blur of the photos, Gaussian sigma in pixels (default {d.optics_blur_px})")
     p.add_argument("--overwrite", action="store_true", help="replace OUT_DIR if it exists")
     p.set_defaults(func=run)
 
@@ -50,5 +52,6 @@ def run(args: argparse.Namespace) -> None:
     from .render import SynthOptions, render_capture
 
     options = SynthOptions(views=args.views, width=args.width, height=args.height, spp=args.spp,
-                           format=args.format, seed=args.seed, env_size=args.env_size, env_spp=args.env_spp)
+                           format=args.format, seed=args.seed, env_size=args.env_size, env_spp=args.env_spp,
+                           optics_blur_px=args.optics_blur)
     render_capture(args.scene, args.out_dir, options, overwrite=args.overwrite)
