@@ -249,7 +249,7 @@ def _probe_raw(path: Path, exif: ExifInfo) -> PhotoInfo:
 
 
 def _probe_raster(path: Path, kind: Kind, exif: ExifInfo) -> PhotoInfo:
-    from PIL import Image, UnidentifiedImageError
+    from PIL import Image
 
     try:
         if kind == "tiff":  # tifffile reads every TIFF header (float, planar, 16-bit) that OpenCV decodes

@@ -3,7 +3,6 @@ back to the ground-truth linear render (times scene.json's factor), measured as 
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from ..artifacts import atomic_dir, atomic_path, write_json, write_manifest
-from ..cameras import CameraSet, load_cameras
+from ..cameras import load_cameras
 from ..config import TrainConfig, add_config_arguments, config_from_arguments
 from ..errors import InputError, OrcaError
 
@@ -51,7 +51,7 @@ def load_image_set(decode_dir: Path, cameras_path: Path, masks_dir: Path):
     """Decoded images matched by name to cameras and masks, intrinsics scaled to the decoded size.
 
     Returns:
-        (``orca.data.ImageSet`` in float32 on the CPU, the image names, the camera set).
+        (``orca.data.ImageSet`` in float32 on the CPU, the image names).
     """
     import torch
 
@@ -101,7 +101,7 @@ def load_image_set(decode_dir: Path, cameras_path: Path, masks_dir: Path):
     if not any(m.any() for m in masks):
         raise InputError("every mask is empty", masks_dir, "check the masks stage output (the object was not found)")
     t = lambda a, dt=torch.float32: torch.from_numpy(np.stack(a)).to(dt)  # noqa: E731
-    return ImageSet(t(images), t(masks, torch.bool), t(valid, torch.bool), t(Ks), t(c2ws)), names, load_cameras(cameras_path)
+    return ImageSet(t(images), t(masks, torch.bool), t(valid, torch.bool), t(Ks), t(c2ws)), names
 
 
 # ----------------------------------------------------------------------------------------------- model
@@ -273,7 +273,7 @@ def run_train(
     started = time.time()
     device = resolve_device(cfg.device)
     torch.manual_seed(cfg.seed)
-    data, names, _ = load_image_set(decode_dir, cameras_path, masks_dir)
+    data, names = load_image_set(decode_dir, cameras_path, masks_dir)
     n_img, height, width = data.shape
     log.info("train: %d images %dx%d, %d object pixels, device %s, %d iterations", n_img, width, height,
              int(data.masks.sum()), device, cfg.iterations)
