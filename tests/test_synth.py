@@ -452,3 +452,12 @@ def test_cli_and_atomic_failure(tmp_path: Path, monkeypatch):
         render_capture(spec, out, SynthOptions(views=2, width=16, height=12, spp=1, env_size=8), overwrite=True)
     assert sorted(p.name for p in out.rglob("*")) == before  # the existing capture is untouched
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cap"]  # no temporary folders left behind
+
+
+def test_light_pixels_are_found_from_geometry():
+    """on_lights must not depend on Mitsuba's shape order (it changes with thread timing between loads)."""
+    from pipeline.synth.scenes import LightSpec
+
+    light = LightSpec(centre=(0.0, 0.0, 5.49), size=(2.0, 2.0), normal=(0.0, 0.0, -1.0), radiance=(9.0, 9.0, 9.0))
+    position = np.array([[[0.3, -0.4, 5.49], [0.3, -0.4, 5.5], [3.0, 0.0, 5.49], [0.0, 0.0, 0.0]]])
+    np.testing.assert_array_equal(synth_render.on_lights(position, [light]), [[True, False, False, False]])

@@ -177,7 +177,6 @@ class _Renderer:
         self.coverage, _ = build.load_scene(scene, assets, "coverage")
         self.env, self.env_index = build.load_scene(scene, assets, "environment")
         self.object_index = self.index[build.OBJECT_ID]
-        self.light_indices = [self.index[light.name] for light in scene.lights]
         self.geometry_aov = build.aov_integrator("pp:position,nn:sh_normal,si:shape_index,al:albedo")
         self.coverage_aov = build.aov_integrator("al:albedo")
         self.env_aov = build.aov_integrator("pp:position,si:shape_index")
@@ -197,7 +196,7 @@ class _Renderer:
         depth = np.where(object_hit, _z_depth(position, v.c2w), np.inf).astype(np.float32)
         normals = np.where(object_hit[..., None], normals, 0.0).astype(np.float32)
         albedo = np.where(object_hit[..., None], albedo, 0.0).astype(np.float32)
-        light_hit = np.isin(index, self.light_indices)
+        light_hit = on_lights(position, self.scene.lights)
 
         cov = build.render(self.coverage, self._sensor(v, o.coverage_spp, "stratified"),
                            integrator=self.coverage_aov, seed=seed)[..., 0]
@@ -241,6 +240,27 @@ class _Renderer:
         inside = r < radius * (1 - 1e-3)  # only the object and the floor under it can be hit in there
         if np.any(r[object_hit] > radius * (1 + 1e-3)) or (inside.any() and not object_hit.any()):
             raise RuntimeError("shape index of the object does not match the geometry (Mitsuba shape order?)")
+
+
+# Lights sit 1 cm in front of their wall or ceiling; hits closer to a light's plane than this are on the light.
+_LIGHT_PLANE_TOLERANCE = 1e-3
+
+
+def on_lights(position: np.ndarray, lights) -> np.ndarray:
+    """``(H, W)`` bool: pixel-centre hits ``(H, W, 3)`` lying on one of the rectangular lights.
+
+    Found from geometry rather than from the shape-index AOV: Mitsuba loads shapes on several threads, so
+    the shape order (and with it the index of each light) can differ between two loads of the same scene.
+    """
+    hit = np.zeros(position.shape[:2], dtype=bool)
+    for light in lights:
+        centre, normal = np.asarray(light.centre, float), np.asarray(light.normal, float)
+        offset = position - centre
+        in_plane = np.abs(offset @ normal) < _LIGHT_PLANE_TOLERANCE
+        # the rectangle's bounding circle in its plane: nothing else lies in that plane near the light
+        within = np.linalg.norm(offset, axis=-1) <= 0.5 * float(np.hypot(*light.size)) + _LIGHT_PLANE_TOLERANCE
+        hit |= in_plane & within
+    return hit
 
 
 def _repair_non_finite(img: np.ndarray, what: str) -> np.ndarray:
@@ -296,6 +316,15 @@ def optics_blur(image: np.ndarray, sigma_px: float) -> np.ndarray:
 
     k = 2 * blur_radius(sigma_px) + 1
     return cv2.GaussianBlur(image, (k, k), sigma_px, borderType=cv2.BORDER_REFLECT).astype(np.float32)
+
+
+def _dilate(mask: np.ndarray, radius: int) -> np.ndarray:
+    """``(H, W)`` bool mask grown by ``radius`` pixels (a square neighbourhood)."""
+    if radius <= 0:
+        return mask
+    import cv2
+
+    return cv2.dilate(mask.astype(np.uint8), np.ones((2 * radius + 1, 2 * radius + 1), np.uint8)) > 0
 
 
 def interior_mask(coverage: np.ndarray, sigma_px: float) -> np.ndarray:
@@ -449,7 +478,9 @@ def render_capture(scene: str | SceneSpec, out_dir: str | Path, options: SynthOp
                 truth = renderer.view(v, seed)
                 metering = float(np.median(truth.linear[..., 1]))
                 if gain is None:
-                    gain = choose_gain(exp, truth.linear, truth.light_hit | (truth.coverage > 0))
+                    # lights' pixels and, past the optics blur, their halos are allowed to clip
+                    exclude = _dilate(truth.light_hit, blur_radius(options.optics_blur_px)) | (truth.coverage > 0)
+                    gain = choose_gain(exp, truth.linear, exclude)
                     reference_metering = metering
                     exposure = reference
                 else:
