@@ -10,6 +10,7 @@ direction) and curvature (the cone's apex and spread).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -77,8 +78,8 @@ def environment_edges(spec: RenderSpec, dtype: torch.dtype, device: torch.device
     """Distances past the surface along a virtual cone, log-spaced (near things get the samples they
     need, far walls still get some), and the same edges normalized to [0, 1] for the distortion loss."""
     s = torch.linspace(0, 1, spec.env_samples + 1, dtype=dtype, device=device)
-    log_near, log_far = torch.log(torch.tensor(spec.env_near)), torch.log(torch.tensor(spec.env_far))
-    u = torch.exp(log_near + s * (log_far - log_near)).to(dtype)
+    log_near, log_far = math.log(spec.env_near), math.log(spec.env_far)
+    u = torch.exp(log_near + s * (log_far - log_near))
     u = torch.cat([torch.zeros_like(u[:1]), u[1:]])  # start exactly at the surface
     return u, s
 

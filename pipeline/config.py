@@ -128,7 +128,6 @@ class PipelineConfig(StrictModel):
 PRESETS: dict[str, dict[str, Any]] = {
     # CPU, the demo capture, tests: small images, small networks.
     "fast": {
-        "decode": {"downscale": 1},
         "train": {
             "iterations": 3000, "batch_rays": 512, "mask_warmup": 300, "checkpoint_every": 250,
             "preview_every": 500, "grid_levels": 8, "grid_log2_table": 14, "grid_max_resolution": 256,

@@ -10,7 +10,6 @@ import argparse
 from dataclasses import replace
 from pathlib import Path
 
-import cv2
 import numpy as np
 import pytest
 
@@ -252,7 +251,7 @@ def test_diffuse_plus_specular_is_full_render(sphere_capture: Path):
         assert abs((full[m] - spec[m]).mean()) / scale > 0.1
         # the lobes live on the object, spread only by the optics blur
         r = synth_render.blur_radius(SPHERE_OPTIONS.optics_blur_px)
-        near = cv2.dilate((cov > 0).astype(np.uint8), np.ones((2 * r + 1, 2 * r + 1), np.uint8)) > 0
+        near = synth_render.dilate_mask(cov > 0, r)
         assert np.all(dif[~near] == 0) and np.all(spec[~near] == 0)
     summary = read_json(gt / "scene.json")["decomposition_residual"]
     assert summary["relative_mean"]["max"] < 0.03

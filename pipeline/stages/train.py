@@ -217,17 +217,13 @@ def _check_resumable(state: dict[str, Any], cfg: TrainConfig, path: Path) -> Non
 # -------------------------------------------------------------------------------------------- previews
 
 
-def _tonemap(x: np.ndarray) -> np.ndarray:
-    from ..imageio import to_srgb8
-
-    return to_srgb8(x)
-
-
 def preview_grid(model, images, K, c2w, downscale: int) -> np.ndarray:
     """One row of 8-bit pictures: photo | render | diffuse | specular | normals | opacity."""
     import torch
 
     from orca.imaging import render_object_image
+
+    from ..imageio import to_srgb8
 
     h, w = images.shape[:2]
     hs, ws = h // downscale, w // downscale
@@ -237,10 +233,10 @@ def preview_grid(model, images, K, c2w, downscale: int) -> np.ndarray:
         r = render_object_image(model, Ks, c2w, hs, ws)
     photo = images[: hs * downscale, : ws * downscale].reshape(hs, downscale, ws, downscale, 3).mean((1, 3))
     tiles = [
-        _tonemap(photo.cpu().numpy()),
-        _tonemap(r["rgb"].cpu().numpy()),
-        _tonemap(r["diffuse"].cpu().numpy()),
-        _tonemap(r["specular"].cpu().numpy()),
+        to_srgb8(photo.cpu().numpy()),
+        to_srgb8(r["rgb"].cpu().numpy()),
+        to_srgb8(r["diffuse"].cpu().numpy()),
+        to_srgb8(r["specular"].cpu().numpy()),
         np.round((r["normal"].cpu().numpy() * 0.5 + 0.5).clip(0, 1) * 255).astype(np.uint8),
         np.repeat(np.round(r["opacity"].cpu().numpy().clip(0, 1) * 255).astype(np.uint8)[..., None], 3, -1),
     ]

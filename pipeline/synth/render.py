@@ -318,7 +318,7 @@ def optics_blur(image: np.ndarray, sigma_px: float) -> np.ndarray:
     return cv2.GaussianBlur(image, (k, k), sigma_px, borderType=cv2.BORDER_REFLECT).astype(np.float32)
 
 
-def _dilate(mask: np.ndarray, radius: int) -> np.ndarray:
+def dilate_mask(mask: np.ndarray, radius: int) -> np.ndarray:
     """``(H, W)`` bool mask grown by ``radius`` pixels (a square neighbourhood)."""
     if radius <= 0:
         return mask
@@ -479,7 +479,7 @@ def render_capture(scene: str | SceneSpec, out_dir: str | Path, options: SynthOp
                 metering = float(np.median(truth.linear[..., 1]))
                 if gain is None:
                     # lights' pixels and, past the optics blur, their halos are allowed to clip
-                    exclude = _dilate(truth.light_hit, blur_radius(options.optics_blur_px)) | (truth.coverage > 0)
+                    exclude = dilate_mask(truth.light_hit, blur_radius(options.optics_blur_px)) | (truth.coverage > 0)
                     gain = choose_gain(exp, truth.linear, exclude)
                     reference_metering = metering
                     exposure = reference
