@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import torch
 from torch import nn
+from torch.autograd.function import once_differentiable
 
 
 def positional_encoding(x: torch.Tensor, num_freqs: int, include_input: bool = True) -> torch.Tensor:
@@ -71,6 +72,26 @@ _PRIMES = (1, 2654435761, 805459861)
 _CORNERS = torch.tensor([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], dtype=torch.long)
 
 
+class _TableLookup(torch.autograd.Function):
+    """``table[idx]`` whose backward accumulates with ``index_add_``: 6x faster on the CPU than
+    embedding's or indexing's backward. Its backward is not differentiated again: the SDF's second
+    derivatives reach the table through the interpolation weights, not through this lookup's backward."""
+
+    @staticmethod
+    def forward(ctx, table: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
+        ctx.save_for_backward(idx)
+        ctx.rows = table.shape[0]
+        return table.index_select(0, idx.reshape(-1)).reshape(*idx.shape, table.shape[1])
+
+    @staticmethod
+    @once_differentiable
+    def backward(ctx, grad: torch.Tensor) -> tuple[torch.Tensor, None]:
+        (idx,) = ctx.saved_tensors
+        features = grad.shape[-1]
+        table_grad = grad.new_zeros(ctx.rows, features).index_add_(0, idx.reshape(-1), grad.reshape(-1, features))
+        return table_grad, None
+
+
 class HashGrid(nn.Module):
     """Multiresolution hash encoding of points in ``[0, 1]^3`` (trilinear interpolation per level).
 
@@ -94,6 +115,12 @@ class HashGrid(nn.Module):
         self.offsets = [0, *torch.tensor(sizes).cumsum(0).tolist()]
         # Small uniform init as in Instant-NGP: the grid starts near zero and the MLP's prior dominates.
         self.table = nn.Parameter(torch.empty(self.offsets[-1], spec.features_per_level).uniform_(-1e-4, 1e-4))
+        # Per-level constants as (L, 1) tensors so that all levels are indexed in one vectorized pass.
+        as_col = lambda v, dt=torch.long: torch.tensor(v, dtype=dt)[:, None]  # noqa: E731
+        self.register_buffer("_res", as_col(resolutions), persistent=False)
+        self.register_buffer("_start", as_col(self.offsets[:-1]), persistent=False)
+        self.register_buffer("_size", as_col(sizes), persistent=False)
+        self.register_buffer("_dense", as_col(dense, torch.bool), persistent=False)
         self.register_buffer("_corners", _CORNERS.clone(), persistent=False)
         self.register_buffer("_primes", torch.tensor(_PRIMES, dtype=torch.long), persistent=False)
 
@@ -112,23 +139,22 @@ class HashGrid(nn.Module):
         Returns:
             ``(N, levels * features_per_level)``.
         """
-        x = x.clamp(0.0, 1.0)
-        feats = []
-        for level, res in enumerate(self.resolutions):
-            pos = x * res
-            base = pos.floor().long().clamp(max=res - 1)  # (N, 3); res-1 keeps x == 1 inside the last voxel
-            frac = pos - base  # (N, 3)
-            corner = base[:, None, :] + self._corners  # (N, 8, 3)
-            if self.dense[level]:
-                idx = (corner[..., 0] * (res + 1) + corner[..., 1]) * (res + 1) + corner[..., 2]
-            else:
-                h = corner * self._primes
-                idx = (h[..., 0] ^ h[..., 1] ^ h[..., 2]) % (self.offsets[level + 1] - self.offsets[level])
-            values = self.table[idx + self.offsets[level]]  # (N, 8, F)
-            # trilinear weights: prod over axes of frac or (1 - frac) depending on the corner bit
-            w = torch.where(self._corners.bool(), frac[:, None, :], 1.0 - frac[:, None, :]).prod(-1)  # (N, 8)
-            level_feats = (w[..., None] * values).sum(1)
-            if scale is not None:
-                level_feats = level_feats * torch.erf(1.0 / torch.sqrt(8 * (scale * res).square() + 1e-12))[:, None]
-            feats.append(level_feats)
-        return torch.cat(feats, dim=-1)
+        n = x.shape[0]
+        res = self._res.to(x.dtype)  # (L, 1)
+        pos = x.clamp(0.0, 1.0)[:, None, :] * res  # (N, L, 3)
+        base = pos.detach().floor().long().minimum(self._res - 1)  # res-1 keeps x == 1 inside the last voxel
+        frac = pos - base
+        corner = base[:, :, None, :] + self._corners  # (N, L, 8, 3)
+        side = self._res + 1
+        dense_idx = (corner[..., 0] * side + corner[..., 1]) * side + corner[..., 2]
+        h = corner * self._primes
+        hash_idx = (h[..., 0] ^ h[..., 1] ^ h[..., 2]) % self._size
+        idx = torch.where(self._dense, dense_idx, hash_idx) + self._start  # (N, L, 8)
+        values = _TableLookup.apply(self.table, idx)  # (N, L, 8, F)
+        # trilinear weights as an outer product of per-axis (1 - frac, frac), in _CORNERS' order
+        a = torch.stack([1.0 - frac, frac], dim=-2)  # (N, L, 2, 3)
+        w = (a[..., :, None, None, 0] * a[..., None, :, None, 1] * a[..., None, None, :, 2]).reshape(n, -1, 8)
+        feats = (w[..., None] * values).sum(-2)  # (N, L, F)
+        if scale is not None:
+            feats = feats * torch.erf(1.0 / torch.sqrt(8 * (scale[:, None] * res[:, 0]).square() + 1e-12))[..., None]
+        return feats.reshape(n, -1)

@@ -26,12 +26,13 @@ Encoding = Literal["hashgrid", "frequency"]
 _CONTRACTED_RADIUS = 2.0
 
 
-def mlp(in_dim: int, hidden: int, layers: int, out_dim: int) -> nn.Sequential:
-    """``layers`` hidden layers of width ``hidden`` with Softplus (smooth: the SDF is differentiated twice)."""
+def mlp(in_dim: int, hidden: int, layers: int, out_dim: int, smooth: bool = True) -> nn.Sequential:
+    """``layers`` hidden layers of width ``hidden``; Softplus if ``smooth`` (the SDF is differentiated
+    twice), else the cheaper ReLU."""
     mods: list[nn.Module] = []
     dim = in_dim
     for _ in range(layers):
-        mods += [nn.Linear(dim, hidden), nn.Softplus(beta=100)]
+        mods += [nn.Linear(dim, hidden), nn.Softplus(beta=100) if smooth else nn.ReLU()]
         dim = hidden
     mods.append(nn.Linear(dim, out_dim))
     return nn.Sequential(*mods)
@@ -122,9 +123,9 @@ class EnvironmentField(nn.Module):
         else:
             self.grid = None
             enc_dim = 2 * 3 * spec.ipe_max_deg
-        self.trunk = mlp(enc_dim, spec.hidden, spec.layers, 1 + spec.hidden)
+        self.trunk = mlp(enc_dim, spec.hidden, spec.layers, 1 + spec.hidden, smooth=False)
         dir_dim = 3 * (2 * spec.dir_freqs + 1) if spec.dir_freqs > 0 else 0
-        self.color = mlp(spec.hidden + dir_dim, spec.color_hidden, 1, 3)
+        self.color = mlp(spec.hidden + dir_dim, spec.color_hidden, 1, 3, smooth=False)
 
     def forward(
         self, means: torch.Tensor, variances: torch.Tensor, dirs: torch.Tensor

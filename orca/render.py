@@ -21,7 +21,7 @@ from .cones import virtual_cone
 from .differential import normalize, normals_and_curvature_fd
 from .fields import EnvironmentField, SDFField
 from .frustum import conical_frustum_gaussian
-from .sampling import ray_sphere_bounds, upsample_to_surface
+from .sampling import ray_sphere_bounds, surface_band, upsample_to_surface
 from .volume import composite_weights, volsdf_density
 
 
@@ -34,6 +34,9 @@ class RenderSpec:
     n_fine: int = 32
     upsample_steps: int = 4
     beta_start: float = 0.1  # first β of the coarse-to-fine search for the surface
+    band_samples: int = 0  # > 0: render only this many samples in a band around the surface (sampling.py)
+    band_half_width: float = 6.0  # the band's half width, in β (divided by the SDF's slope along the ray)
+    band_min_slope: float = 0.1  # caps the band's widening for grazing and missing rays
     cone_samples: int = 2
     cone_method: ConeMethod = "closed_form"
     curvature_eps: float = 2e-3  # finite-difference step for the mean curvature at cone samples
@@ -165,10 +168,15 @@ def render_rays(
     near, far, _ = ray_sphere_bounds(origins, dirs, spec.object_radius)
     # Rays that miss the bounding sphere get an empty interval beyond it: zero weight, no special case.
     far = torch.maximum(far, near + 1e-4)
-    t = upsample_to_surface(
+    t, values = upsample_to_surface(
         sdf_field.sdf, origins, dirs, near, far, n_coarse=spec.n_coarse, n_fine=spec.n_fine,
         steps=spec.upsample_steps, beta_start=spec.beta_start, deterministic=spec.deterministic,
     )
+    if spec.band_samples > 0:
+        t = surface_band(
+            t, values, float(beta.detach()), spec.band_samples, half_width_betas=spec.band_half_width,
+            min_slope=spec.band_min_slope, deterministic=spec.deterministic,
+        )
     mid = 0.5 * (t[:, 1:] + t[:, :-1])  # (N, S)
     x = origins[:, None] + mid[..., None] * dirs[:, None]  # (N, S, 3)
     flat = x.reshape(-1, 3).detach().requires_grad_(True)

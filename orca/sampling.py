@@ -3,6 +3,16 @@ coarse-to-fine upsampling that finds the SDF's zero crossing.
 
 The object lives in the unit sphere of its normalized frame, so primary rays are sampled only between
 their entry and exit of that sphere; a coarse pass on the SDF then concentrates samples at the surface.
+
+Two ways to choose the samples that are rendered (with gradients):
+
+* ``upsample_to_surface`` alone (the ``paper`` preset): every coarse and fine sample is rendered, as NeuS
+  and the paper's code do.
+* ``upsample_to_surface`` then ``surface_band`` (``fast``/``standard``): the no-gradient samples only locate
+  the first zero crossing; the rendered samples are a narrow band around it, a few β wide (divided by the
+  SDF's slope along the ray, so grazing rays get a wider band). VolSDF's density in front of the band is
+  below ``exp(-half_width_betas)`` of its peak, so dropping it changes the colour by less than that, and
+  the expensive pass (SDF with double-differentiable gradients) runs on 3x fewer points.
 """
 
 from __future__ import annotations
@@ -88,7 +98,7 @@ def upsample_to_surface(
     Args:
         origins, dirs: ``(N, 3)``; near, far: ``(N,)``.
     Returns:
-        ``(N, n_coarse + n_fine)`` sorted sample edges.
+        ``(N, n_coarse + n_fine)`` sorted sample edges and ``(N, n_coarse + n_fine)`` SDF values there.
     """
     n = origins.shape[0]
     u = torch.linspace(0, 1, n_coarse, dtype=origins.dtype, device=origins.device)
@@ -105,4 +115,48 @@ def upsample_to_surface(
             v_new = sdf((origins[:, None] + t_new[..., None] * dirs[:, None]).reshape(-1, 3)).reshape(n, -1)
             t, order = torch.sort(torch.cat([t, t_new], -1), dim=-1)
             values = torch.cat([values, v_new], -1).gather(1, order)
-    return t
+    return t, values
+
+
+def surface_band(
+    t: torch.Tensor,
+    values: torch.Tensor,
+    beta: float,
+    n_samples: int,
+    *,
+    half_width_betas: float,
+    min_slope: float,
+    deterministic: bool = False,
+    generator: torch.Generator | None = None,
+) -> torch.Tensor:
+    """Interval edges of a band around each ray's first zero crossing of the SDF.
+
+    Args:
+        t: ``(N, S)`` sorted distances where the SDF was evaluated; values: ``(N, S)`` the SDF there.
+        beta: the current VolSDF β (the band's width scales with it).
+        n_samples: intervals in the band.
+        half_width_betas: half the band's width in units of β / slope.
+        min_slope: floor of |df/dt| used for the width (rays that graze or miss the surface).
+        deterministic: evenly spaced edges; otherwise the whole comb is shifted by a random fraction of one
+            spacing per ray (stratified sampling).
+    Returns:
+        ``(N, n_samples + 1)`` sorted edges. Rays without a crossing get a band at their SDF minimum (the
+        point where the mask loss can pull the surface towards them).
+    """
+    t, values = t.detach(), values.detach()
+    crossing = (values[:, :-1] > 0) & (values[:, 1:] <= 0)
+    has_crossing = crossing.any(-1)
+    first = crossing.to(torch.uint8).argmax(-1)  # the first True
+    nearest = values[:, :-1].abs().argmin(-1)
+    i = torch.where(has_crossing, first, nearest)[:, None]
+    t0, t1 = t.gather(1, i), t.gather(1, i + 1)
+    v0, v1 = values.gather(1, i), values.gather(1, i + 1)
+    slope = ((v0 - v1) / (t1 - t0).clamp_min(1e-9)).abs()
+    frac = (v0 / (v0 - v1)).nan_to_num(0.0).clamp(0, 1)
+    centre = torch.where(has_crossing[:, None], t0 + frac * (t1 - t0), t0)  # (N, 1)
+    half = half_width_betas * beta / slope.clamp(min_slope, 1.0)
+    comb = torch.linspace(-1, 1, n_samples + 1, dtype=t.dtype, device=t.device)
+    if not deterministic:
+        shift = torch.rand(t.shape[0], 1, dtype=t.dtype, device=t.device, generator=generator) - 0.5
+        comb = comb + shift * (2.0 / n_samples)
+    return (centre + half * comb).clamp_min(0.0)

@@ -111,6 +111,10 @@ class TrainConfig(StrictModel):
     # rendering
     n_coarse: int = Field(48, ge=4)
     n_fine: int = Field(32, ge=0)
+    upsample_steps: int = Field(4, ge=1, description="rounds of coarse-to-fine search for the surface")
+    band_samples: int = Field(
+        32, ge=0, description="rendered samples in a band around the surface; 0: render every coarse and fine sample"
+    )
     env_samples: int = Field(48, ge=4)
     cone_samples: int = Field(2, ge=1, description="top-weight primary samples that cast virtual cones")
     cone_method: Literal["closed_form", "bounding_rays", "naive"] = "closed_form"
@@ -131,7 +135,9 @@ PRESETS: dict[str, dict[str, Any]] = {
         "train": {
             "iterations": 3000, "batch_rays": 512, "mask_warmup": 300, "checkpoint_every": 250,
             "preview_every": 500, "grid_levels": 8, "grid_log2_table": 14, "grid_max_resolution": 256,
-            "env_grid_log2_table": 15, "n_coarse": 32, "n_fine": 16, "env_samples": 24,
+            "env_grid_log2_table": 15, "n_coarse": 24, "n_fine": 8, "upsample_steps": 2, "band_samples": 16,
+            "env_samples": 24,
+            "cone_samples": 1,
         },
     },
     # A GPU and a real capture.
@@ -139,7 +145,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     # The paper's network sizes and sample counts.
     "paper": {
         "train": {
-            "sdf_encoding": "frequency", "sdf_hidden": 256, "sdf_layers": 8, "env_encoding": "ipe",
+            "sdf_encoding": "frequency", "sdf_hidden": 256, "sdf_layers": 8, "env_encoding": "ipe", "band_samples": 0,
             "env_hidden": 256, "env_layers": 8, "n_coarse": 64, "n_fine": 128, "env_samples": 128,
             "cone_samples": 4, "cone_method": "bounding_rays", "iterations": 200000, "batch_rays": 1024,
         },

@@ -129,7 +129,8 @@ def model_spec(cfg: TrainConfig):
             hidden=cfg.env_hidden, layers=cfg.env_layers,
         ),
         render=RenderSpec(
-            object_radius=cfg.scene_radius, n_coarse=cfg.n_coarse, n_fine=cfg.n_fine,
+            object_radius=cfg.scene_radius, n_coarse=cfg.n_coarse, n_fine=cfg.n_fine, upsample_steps=cfg.upsample_steps,
+            band_samples=cfg.band_samples,
             env_samples=cfg.env_samples, cone_samples=cfg.cone_samples, cone_method=cfg.cone_method, ior=cfg.ior,
         ),
         beta_init=cfg.beta_init,
