@@ -48,9 +48,21 @@ def capture_config(wildcards):
     return [str(path)] if path.exists() else []
 
 
+def cameras_and_masks(wildcards):
+    """Cameras and masks for training. The poses and masks stages are not built yet, so only a synthetic
+    capture's ground truth can provide them."""
+    gt = CAPTURES_DIR / wildcards.capture / "ground_truth"
+    if (gt / "cameras.json").is_file() and (gt / "masks").is_dir():
+        return {"cameras": str(gt / "cameras.json"), "masks": str(gt / "masks")}
+    raise ValueError(
+        f"capture {wildcards.capture!r} has no ground_truth/cameras.json and masks/: training a real capture "
+        "needs the poses and masks stages, which are not built yet (for now: `orca train --cameras --masks`)."
+    )
+
+
 rule all:
     input:
-        expand(RESULTS_DIR / "{capture}" / "decode", capture=CAPTURES),
+        expand(RESULTS_DIR / "{capture}" / "train", capture=CAPTURES),
 
 
 rule decode:
@@ -64,3 +76,20 @@ rule decode:
         RESULTS_DIR / "{capture}" / "logs" / "decode.log",
     shell:
         "{ORCA} decode {CAPTURES_DIR}/{wildcards.capture} --out {output} --preset {PRESET} > {log} 2>&1"
+
+
+rule train:
+    """Decoded photos + cameras + masks -> the trained model (SDF, diffuse head, environment field).
+    Checkpoints go to train.checkpoints/ beside the output, so a killed job resumes where it stopped."""
+    input:
+        unpack(cameras_and_masks),
+        decode=RESULTS_DIR / "{capture}" / "decode",
+        capture_yaml=capture_config,
+    output:
+        directory(RESULTS_DIR / "{capture}" / "train"),
+    log:
+        RESULTS_DIR / "{capture}" / "logs" / "train.log",
+    threads: workflow.cores
+    shell:
+        "{ORCA} train --decode {input.decode} --cameras {input.cameras} --masks {input.masks} "
+        "--capture {CAPTURES_DIR}/{wildcards.capture} --out {output} --preset {PRESET} > {log} 2>&1"

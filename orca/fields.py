@@ -99,7 +99,9 @@ class SDFField(nn.Module):
 
 @dataclass(frozen=True)
 class EnvironmentFieldSpec:
-    encoding: Literal["hashgrid", "ipe"] = "hashgrid"
+    # "direction": the ablation of the paper's Fig. 8: a 2D environment map, radiance from the cone's axis
+    # alone (position dropped), hash-grid encoded on the unit sphere of directions.
+    encoding: Literal["hashgrid", "ipe", "direction"] = "hashgrid"
     hash_grid: HashGridSpec = field(
         default_factory=lambda: HashGridSpec(levels=12, log2_table_size=17, base_resolution=16, max_resolution=1024)
     )
@@ -117,7 +119,7 @@ class EnvironmentField(nn.Module):
     def __init__(self, spec: EnvironmentFieldSpec = EnvironmentFieldSpec()):
         super().__init__()
         self.spec = spec
-        if spec.encoding == "hashgrid":
+        if spec.encoding in ("hashgrid", "direction"):
             self.grid: HashGrid | None = HashGrid(spec.hash_grid)
             enc_dim = self.grid.out_dim
         else:
@@ -155,3 +157,17 @@ class EnvironmentField(nn.Module):
             feat = torch.cat([feat, d], dim=-1)
         radiance = F.softplus(self.color(feat))
         return density, radiance
+
+    @property
+    def directional(self) -> bool:
+        """True for the 2D environment map ablation (no position, no depth)."""
+        return self.spec.encoding == "direction"
+
+    def radiance_at_infinity(self, dirs: torch.Tensor, spread: torch.Tensor) -> torch.Tensor:
+        """Radiance of the 2D environment map: ``(N, 3)`` unit directions and ``(N,)`` angular radius of
+        the cone (radians) -> ``(N, 3)``; the footprint blurs the map as the cone widens."""
+        enc = self.grid((dirs + 1) * 0.5, spread * 0.5)  # the unit sphere spans half the grid's cube
+        feat = self.trunk(enc)[:, 1:]
+        if self.spec.dir_freqs > 0:
+            feat = torch.cat([feat, positional_encoding(dirs, self.spec.dir_freqs)], dim=-1)
+        return F.softplus(self.color(feat))

@@ -103,8 +103,13 @@ def render_environment_along(
         apex, axis: ``(M, 3)``; radius_growth, t_start: ``(M,)``.
     Returns:
         radiance ``(M, 3)``, depth past the start ``(M,)``, weights ``(M, E)``, normalized edges ``(E + 1,)``.
+        A directional (2D map) field gives infinite depth and zero weights.
     """
     u, s = environment_edges(spec, apex.dtype, apex.device)
+    if env.directional:  # a 2D map: no depth, nothing along the cone to weigh
+        rgb = env.radiance_at_infinity(axis, radius_growth)
+        depth = torch.full_like(radius_growth, math.inf)
+        return rgb, depth, torch.zeros(apex.shape[0], spec.env_samples, dtype=apex.dtype, device=apex.device), s
     t = t_start[:, None] + u  # (M, E + 1)
     means, variances = conical_frustum_gaussian(apex, axis, radius_growth, t[:, :-1], t[:, 1:])
     density, radiance = env(means, variances, axis)

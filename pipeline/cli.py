@@ -25,6 +25,8 @@ COMMANDS: list[tuple[str, str]] = [
     ("synth", "pipeline.synth.cli"),
     ("decode", "pipeline.stages.decode"),
     ("train", "pipeline.stages.train"),
+    ("evaluate", "pipeline.stages.evaluate"),
+    ("render", "pipeline.stages.render"),
 ]
 
 log = logging.getLogger("orca")

@@ -104,7 +104,9 @@ class TrainConfig(StrictModel):
     grid_log2_table: int = Field(16, ge=8, le=24)
     grid_max_resolution: int = Field(1024, ge=16)
     # environment
-    env_encoding: Literal["hashgrid", "ipe"] = "hashgrid"
+    env_encoding: Literal["hashgrid", "ipe", "direction"] = Field(
+        "hashgrid", description="'direction': the 2D environment map ablation (radiance from direction only)"
+    )
     env_hidden: int = Field(64, ge=8)
     env_layers: int = Field(2, ge=1)
     env_grid_log2_table: int = Field(17, ge=8, le=24)

@@ -8,10 +8,9 @@ import os
 # the cores once both are loaded in one process (a torch test ran 3x slower after the decode tests).
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from dataclasses import replace  # noqa: E402
-from pathlib import Path
+from pathlib import Path  # noqa: E402
 
-import pytest
+import pytest  # noqa: E402
 
 
 @pytest.fixture(scope="session")
@@ -20,14 +19,10 @@ def tiny_capture(tmp_path_factory) -> Path:
     pytest.importorskip("mitsuba")
     from pipeline.synth import SCENES, SynthOptions, render_capture
 
-    spec = SCENES["sphere"]
-    spec = replace(
-        spec,
-        room=replace(spec.room, texels_per_unit=12.0, prop_texels_per_unit=32.0),
-        object=replace(spec.object, albedo=replace(spec.object.albedo, texture_size=(128, 64))),
-    )
+    from helpers import small
+
     options = SynthOptions(views=4, width=48, height=36, spp=16, env_size=16, coverage_spp=9, seed=1)
-    return render_capture(spec, tmp_path_factory.mktemp("tiny") / "sphere", options)
+    return render_capture(small(SCENES["sphere"]), tmp_path_factory.mktemp("tiny") / "sphere", options)
 
 
 @pytest.fixture(scope="session")

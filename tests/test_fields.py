@@ -41,3 +41,21 @@ def test_environment_field_shapes_and_gradients(encoding):
     assert (density >= 0).all() and (rgb >= 0).all()
     (density.sum() + rgb.sum()).backward()
     assert d.grad is not None and torch.isfinite(d.grad).all() and d.grad.abs().sum() > 0
+
+
+def test_directional_environment_map_ignores_position_and_has_no_depth():
+    from orca.render import RenderSpec, render_environment_along
+
+    torch.manual_seed(0)
+    env = EnvironmentField(EnvironmentFieldSpec(encoding="direction", hash_grid=SMALL_GRID))
+    with torch.no_grad():
+        env.grid.table.normal_()
+    d = torch.nn.functional.normalize(torch.randn(8, 3), dim=-1)
+    spread = torch.full((8,), 1e-3)
+    spec = RenderSpec(env_samples=8)
+    rgb_a, depth, w, _ = render_environment_along(env, torch.zeros(8, 3), d, spread, torch.zeros(8), spec)
+    rgb_b, _, _, _ = render_environment_along(env, torch.randn(8, 3), d, spread, torch.rand(8), spec)
+    torch.testing.assert_close(rgb_a, rgb_b)  # a 2D map: the same radiance from anywhere
+    assert torch.isinf(depth).all() and (w == 0).all()
+    other = env.radiance_at_infinity(torch.nn.functional.normalize(d + 0.5, dim=-1), spread)
+    assert (other - rgb_a).abs().max() > 1e-4  # but it does depend on the direction

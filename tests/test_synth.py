@@ -22,14 +22,9 @@ from pipeline.synth.build import _frame_for
 from pipeline.synth.scenes import AlbedoSpec, SceneSpec, object_mesh, resolve, rotation_xyz
 from pipeline.synth.textures import PosterStyle, poster
 
+from helpers import small
+
 pytest.importorskip("mitsuba")
-
-
-def small(spec: SceneSpec) -> SceneSpec:
-    """The same scene with coarse textures (texture generation dominates tiny renders otherwise)."""
-    room = replace(spec.room, texels_per_unit=12.0, prop_texels_per_unit=32.0)
-    albedo = replace(spec.object.albedo, texture_size=(128, 64))
-    return replace(spec, room=room, object=replace(spec.object, albedo=albedo))
 
 
 SPHERE_OPTIONS = SynthOptions(views=3, width=96, height=72, spp=64, env_size=24, coverage_spp=16, format="both",

@@ -172,7 +172,11 @@ def _checkpoints(folder: Path) -> list[Path]:
     return sorted(folder.glob("step_*.pt")) if folder.is_dir() else []
 
 
-def save_checkpoint(folder: Path, step: int, model, optimizer, scheduler, cfg: TrainConfig, keep: int) -> Path:
+def save_checkpoint(
+    folder: Path, step: int, model, optimizer, scheduler, cfg: TrainConfig, keep: int, seconds: float
+) -> Path:
+    """Write ``step_XXXXXXX.pt`` atomically and drop all but the ``keep`` newest; ``seconds``: training time
+    so far, over every resumed run."""
     import torch
 
     path = folder / f"step_{step:07d}.pt"
@@ -183,6 +187,7 @@ def save_checkpoint(folder: Path, step: int, model, optimizer, scheduler, cfg: T
         "optimizer": optimizer.state_dict(),
         "scheduler": scheduler.state_dict(),
         "config": cfg.model_dump_json(),
+        "seconds": seconds,
     }
     with atomic_path(path) as tmp:
         torch.save(state, tmp)
@@ -286,6 +291,7 @@ def run_train(
         shutil.rmtree(ckpt_dir)
     ckpt_dir.mkdir(parents=True, exist_ok=True)
     step = 0
+    seconds_before = 0.0
     existing = _checkpoints(ckpt_dir)
     if existing:
         state = load_checkpoint(existing[-1])
@@ -294,6 +300,7 @@ def run_train(
         optimizer.load_state_dict(state["optimizer"])
         scheduler.load_state_dict(state["scheduler"])
         step = int(state["step"])
+        seconds_before = float(state.get("seconds", 0.0))
         log.info("resuming from %s (step %d of %d)", existing[-1], step, cfg.iterations)
     # The sampler is reseeded from the step so a resumed run draws the batches an uninterrupted one would.
     generator = torch.Generator().manual_seed(cfg.seed * 1_000_003 + step)
@@ -339,7 +346,8 @@ def run_train(
                     obj = batch.mask > 0.5
                     mse = ((out.rgb - batch.rgb)[obj].square().mean()).item() if obj.any() else float("nan")
                     psnr = -10 * math.log10(max(mse, 1e-12)) if mse == mse else float("nan")
-                    row = {"step": step, "phase": phase, "loss": total.item(), "psnr_object": psnr,
+                    row = {"step": step, "seconds": round(seconds_before + time.time() - t0, 2), "phase": phase,
+                           "loss": total.item(), "psnr_object": psnr,
                            "beta": model.beta.item(), "lr": scheduler.get_last_lr()[0],
                            **{k: v.item() for k, v in terms.items()}}
                     metrics.write(json.dumps(row) + "\n")
@@ -350,13 +358,15 @@ def run_train(
                     bar.update(task, completed=step, description=f"train {phase} loss {total.item():.4f} "
                                f"PSNR {psnr:.1f}")
                 if step % cfg.checkpoint_every == 0 or step == stop_at:
-                    save_checkpoint(ckpt_dir, step, model, optimizer, scheduler, cfg, cfg.keep_checkpoints)
+                    save_checkpoint(ckpt_dir, step, model, optimizer, scheduler, cfg, cfg.keep_checkpoints,
+                                    seconds_before + time.time() - t0)
                 if step % cfg.preview_every == 0 or step == cfg.iterations:
                     grid = preview_grid(model, data.images[0], data.K[0], data.c2w[0], cfg.preview_downscale)
                     write_png(previews / f"step_{step:07d}.png", grid)
                     writer.add_image("preview", grid, step, dataformats="HWC")
     except KeyboardInterrupt:
-        save_checkpoint(ckpt_dir, step, model, optimizer, scheduler, cfg, cfg.keep_checkpoints)
+        save_checkpoint(ckpt_dir, step, model, optimizer, scheduler, cfg, cfg.keep_checkpoints,
+                        seconds_before + time.time() - t0)
         log.warning("interrupted at step %d; checkpoint saved in %s; rerun to resume", step, ckpt_dir)
         raise
     finally:
@@ -378,7 +388,7 @@ def run_train(
         shutil.copytree(ckpt_dir / "tb", tmp / "tensorboard")
         write_json(tmp / "train_report.json", {
             "iterations": step, "images": names, "size": [width, height], "device": str(device),
-            "seconds_this_run": round(seconds, 2), "final_losses": final_losses, "beta": model.beta.item(),
+            "seconds_this_run": round(seconds, 2), "training_seconds": round(seconds_before + seconds, 2), "final_losses": final_losses, "beta": model.beta.item(),
         })
         write_manifest(tmp, stage="train", inputs={"cameras": cameras_path, "decode": decode_dir / "decode.json"},
                        config=cfg.model_dump(), started=started)
@@ -404,8 +414,9 @@ def load_model(train_dir: Path, device: str = "cpu"):
 
 EPILOG = """\
 examples:
-  orca train --ground-truth captures/demo/ground_truth --decode results/demo/decode --preset fast
-        train from a synthetic capture's ground-truth cameras and masks
+  orca train --ground-truth captures/demo/ground_truth --decode results/demo/decode \
+             --capture captures/demo --preset fast
+        train from a synthetic capture's ground-truth cameras and masks, with its capture.yaml
   orca train --decode results/mug/decode --cameras results/mug/poses/cameras.json \\
              --masks results/mug/masks/masks --out results/mug/train
   orca train ... --set iterations=500 --device cpu     a short CPU run
@@ -427,6 +438,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--masks", type=Path, default=None, help="folder of <image name>.png object masks")
     p.add_argument("--ground-truth", type=Path, default=None,
                    help="a synthetic capture's ground_truth/ folder: its cameras.json and masks/ are used")
+    p.add_argument("--capture", type=Path, default=None,
+                   help="the capture folder: its capture.yaml (if any) configures training")
     p.add_argument("--out", type=Path, default=None, help="output folder (default: beside --decode, train/)")
     p.add_argument("--device", choices=["auto", "cpu", "cuda"], default=None, help="overrides train.device")
     p.add_argument("--restart", action="store_true", help="discard checkpoints and train from scratch")
@@ -442,7 +455,8 @@ def main(args: argparse.Namespace) -> TrainResult | None:
         cameras, masks = args.cameras, args.masks
     if cameras is None or masks is None:
         raise InputError("train needs cameras and masks: pass --cameras and --masks, or --ground-truth")
-    config = config_from_arguments(args, "train")
+    capture_yaml = args.capture / "capture.yaml" if args.capture is not None else None
+    config = config_from_arguments(args, "train", capture_yaml)
     cfg = config.train if args.device is None else config.train.model_copy(update={"device": args.device})
     out = args.out if args.out is not None else Path(args.decode).parent / "train"
     return run_train(Path(args.decode), Path(cameras), Path(masks), out, cfg, restart=args.restart)

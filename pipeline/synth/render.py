@@ -5,6 +5,7 @@ Layout written (``<stem>`` = ``IMG_0001`` ...; see :data:`LAYOUT` and ``ground_t
     OUT/
       IMG_0001.dng ...            RAW photos (Bayer mosaic, EXIF exposure varies like auto-exposure) and/or
       IMG_0001.jpg ...            sRGB JPEGs (--format jpg|both)
+      capture.yaml                the object's coat IOR for training (what a user knowing the material sets)
       ground_truth/
         cameras.json              every photo's pose + intrinsics (OpenCV, world frame below), image -> photo
         scene.json                object centre/radius, props, lights, exposure per photo, radiance<->decoded
@@ -520,6 +521,10 @@ def render_capture(scene: str | SceneSpec, out_dir: str | Path, options: SynthOp
         save_cameras(tmp / LAYOUT["environment"] / "cameras.json", CameraSet(
             frame=Frame(), cameras=[v.camera(f"rgb/{v.name}.exr") for v in env_views]))
         factor = decoded_scale(gain, reference, SensorModel())
+        # What a person who knows the material would write: the coat's index of refraction (Fresnel).
+        (tmp / "capture.yaml").write_text(
+            f"# Settings for this capture (see pipeline/config.py); written by orca synth.\n"
+            f"train:\n  ior: {spec.object.int_ior}  # the object's coat (plastic, glaze)\n", encoding="utf-8")
         write_json(tmp / LAYOUT["scene"], _scene_json(
             resolved, options, photos, residuals, factor, gain, env_views, mi.__version__))
         timing = {"views": len(views), "seconds_per_view": float(np.mean(view_seconds)),

@@ -1,0 +1,131 @@
+"""Training and rendering speed per preset: seconds per iteration, training rays/s, rendering rays/s.
+
+    python bench/train_speed.py                       # every preset, on CUDA if there is a GPU, else CPU
+    python bench/train_speed.py --device cpu --presets fast --steps 20
+
+The data are a synthetic ring of posed images of a sphere-sized object (the speed of a step does not
+depend on the pixels' values), so the benchmark needs no capture. Prints a table and writes
+bench/results/train_speed_<device>.json with the machine's description.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+
+from orca.data import ImageSet  # noqa: E402
+from orca.model import OrcaModel, objective  # noqa: E402
+from pipeline.cameras import intrinsics_from_fov, look_at  # noqa: E402
+from pipeline.config import PRESETS, load_config  # noqa: E402
+from pipeline.stages.train import loss_weights, model_spec, resolve_device  # noqa: E402
+
+RESULTS = Path(__file__).parent / "results"
+VIEWS, WIDTH, HEIGHT, FOV_DEG, DISTANCE = 16, 320, 240, 40.0, 4.0
+
+
+def synthetic_images(device: torch.device) -> ImageSet:
+    """``VIEWS`` cameras on a ring looking at the unit sphere; mask = the sphere's silhouette."""
+    fx, fy, cx, cy = intrinsics_from_fov(WIDTH, HEIGHT, FOV_DEG)
+    K = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]])
+    angles = np.linspace(0, 2 * np.pi, VIEWS, endpoint=False)
+    c2w = np.stack([look_at(DISTANCE * np.array([np.cos(a), np.sin(a), 0.4]), np.zeros(3)) for a in angles])
+    v, u = np.mgrid[0:HEIGHT, 0:WIDTH]
+    r = np.hypot(u + 0.5 - cx, v + 0.5 - cy)
+    silhouette = r < fx / np.sqrt(DISTANCE**2 * 1.16 - 1)  # the unit sphere's angular radius, roughly
+    g = torch.Generator().manual_seed(0)
+    images = torch.rand(VIEWS, HEIGHT, WIDTH, 3, generator=g)
+    masks = torch.from_numpy(np.broadcast_to(silhouette, (VIEWS, HEIGHT, WIDTH)).copy())
+    valid = torch.ones_like(masks)
+    f32 = lambda a: torch.from_numpy(np.asarray(a, dtype=np.float32))  # noqa: E731
+    return ImageSet(images, masks, valid, f32(np.broadcast_to(K, (VIEWS, 3, 3))), f32(c2w)).to(device)
+
+
+def bench_preset(preset: str, device: torch.device, steps: int, warmup: int) -> dict:
+    cfg = load_config(preset=preset).train
+    torch.manual_seed(0)
+    data = synthetic_images(device)
+    model = OrcaModel(model_spec(cfg)).to(device)
+    optimizer = torch.optim.Adam(model.parameters(), lr=cfg.lr, eps=1e-15)
+    weights = loss_weights(cfg)
+    g = torch.Generator().manual_seed(0)
+
+    def sync() -> None:
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+
+    def step() -> None:
+        batch = data.sample(cfg.batch_rays, cfg.object_fraction, g)
+        total, _, _ = objective(model, batch, weights, "joint")
+        optimizer.zero_grad(set_to_none=True)
+        total.backward()
+        torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+        optimizer.step()
+
+    for _ in range(warmup):
+        step()
+    sync()
+    if device.type == "cuda":
+        torch.cuda.reset_peak_memory_stats()
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        step()
+    sync()
+    per_step = (time.perf_counter() - t0) / steps
+
+    # Rendering (evaluation): object rays, no parameter gradients.
+    batch = data.sample(cfg.batch_rays, 1.0, g)
+    model.eval()
+    with torch.no_grad():
+        model(batch.origins, batch.dirs, batch.radii)
+        sync()
+        t0 = time.perf_counter()
+        for _ in range(max(steps // 2, 1)):
+            model(batch.origins, batch.dirs, batch.radii)
+        sync()
+        render_s = (time.perf_counter() - t0) / max(steps // 2, 1)
+    return {
+        "preset": preset, "batch_rays": cfg.batch_rays, "iterations": cfg.iterations,
+        "seconds_per_iteration": per_step, "train_rays_per_second": cfg.batch_rays / per_step,
+        "render_rays_per_second": cfg.batch_rays / render_s,
+        "full_training_minutes": per_step * cfg.iterations / 60,
+        "peak_gpu_memory_gb": torch.cuda.max_memory_allocated() / 2**30 if device.type == "cuda" else None,
+    }
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--presets", nargs="+", default=list(PRESETS), choices=list(PRESETS))
+    p.add_argument("--device", default="auto", choices=["auto", "cpu", "cuda"])
+    p.add_argument("--steps", type=int, default=10, help="timed iterations per preset")
+    p.add_argument("--warmup", type=int, default=3)
+    p.add_argument("--out", type=Path, default=None)
+    args = p.parse_args()
+    device = resolve_device(args.device)
+    rows = []
+    for preset in args.presets:
+        row = bench_preset(preset, device, args.steps, args.warmup)
+        rows.append(row)
+        print(f"{preset:9s} {row['seconds_per_iteration']:8.3f} s/it  {row['train_rays_per_second']:9.0f} train rays/s  "
+              f"{row['render_rays_per_second']:9.0f} render rays/s  (batch {row['batch_rays']}; "
+              f"{row['iterations']} iterations = {row['full_training_minutes']:.1f} min)", flush=True)
+    machine = {
+        "device": torch.cuda.get_device_name(0) if device.type == "cuda" else platform.processor() or platform.machine(),
+        "cpu_threads": torch.get_num_threads(), "torch": torch.__version__, "platform": platform.platform(),
+    }
+    out = args.out or RESULTS / f"train_speed_{device.type}.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"machine": machine, "steps": args.steps, "results": rows}, indent=2) + "\n")
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()

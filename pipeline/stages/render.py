@@ -1,0 +1,133 @@
+"""``orca render``: any list of cameras (the ``cameras.json`` schema) rendered by a trained model, as EXR.
+
+Object cameras give, per camera ``<name>``: ``<name>_rgb.exr`` (diffuse + specular), ``_diffuse.exr``,
+``_specular.exr``, ``_normal.exr`` (world unit normals, 0 off the object), ``_depth.exr`` (z-depth, +inf
+off the object, as the ground truth), ``_mask.png`` (0/255, opacity >= 0.5) and ``<name>_rgb.png`` (8-bit
+sRGB to look at). ``--environment`` renders the environment field alone (the object removed) from
+cameras anywhere (inside the object, translated, rotated): ``<name>_rgb.exr``, ``<name>_depth.exr``,
+``<name>_rgb.png``. Cameras live in the frame the model was trained in; ``views.json`` records them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..artifacts import atomic_dir, write_manifest
+from ..cameras import Camera, CameraSet, load_cameras, save_cameras
+from ..errors import InputError
+from ..imageio import to_srgb8, write_exr, write_png
+
+log = logging.getLogger("orca.render")
+
+OPACITY_THRESHOLD = 0.5  # the object mask, like the ground truth's coverage >= 0.5
+
+
+def _camera_tensors(cam: Camera, downscale: int, device):
+    import torch
+
+    K = cam.K.copy()
+    K[:2] /= downscale
+    as_t = lambda a: torch.as_tensor(np.asarray(a, dtype=np.float32), device=device)  # noqa: E731
+    return as_t(K), as_t(cam.c2w), cam.height // downscale, cam.width // downscale
+
+
+def render_object_view(model, cam: Camera, downscale: int = 1) -> dict[str, np.ndarray]:
+    """The object as ``cam`` sees it: ``rgb``, ``diffuse``, ``specular``, ``normal`` ``(H, W, 3)``, ``depth``
+    ``(H, W)`` (+inf off the object), ``mask`` ``(H, W)`` bool, ``opacity`` ``(H, W)``."""
+    import torch
+
+    from orca.imaging import render_object_image
+
+    device = next(model.parameters()).device
+    K, c2w, h, w = _camera_tensors(cam, downscale, device)
+    with torch.no_grad():
+        r = {k: v.cpu().numpy() for k, v in render_object_image(model, K, c2w, h, w).items()}
+    mask = r["opacity"] >= OPACITY_THRESHOLD
+    normal = r["normal"] / np.linalg.norm(r["normal"], axis=-1, keepdims=True).clip(1e-8)
+    # expected depth of a half-transparent pixel is not a surface; mark it like a miss
+    depth = np.where(mask, r["depth"] / np.maximum(r["opacity"], 1e-8), np.inf)
+    return {"rgb": r["rgb"], "diffuse": r["diffuse"], "specular": r["specular"],
+            "normal": np.where(mask[..., None], normal, 0.0), "depth": depth, "mask": mask, "opacity": r["opacity"]}
+
+
+def render_environment_view(model, cam: Camera, downscale: int = 1) -> dict[str, np.ndarray]:
+    """The environment field alone from ``cam``: ``rgb`` ``(H, W, 3)`` and z-depth ``depth`` ``(H, W)``."""
+    from orca.imaging import render_environment_image
+
+    device = next(model.parameters()).device
+    K, c2w, h, w = _camera_tensors(cam, downscale, device)
+    r = render_environment_image(model, K, c2w, h, w)
+    return {"rgb": r["rgb"].cpu().numpy(), "depth": r["depth"].cpu().numpy()}
+
+
+def write_views(folder: Path, name: str, images: dict[str, np.ndarray]) -> None:
+    """``<name>_<key>.exr`` for every float image, ``_mask.png`` for the mask, ``_rgb.png`` to look at."""
+    for key, image in images.items():
+        if key == "mask":
+            write_png(folder / f"{name}_mask.png", image.astype(np.uint8) * 255)
+        elif key != "opacity":
+            write_exr(folder / f"{name}_{key}.exr", image.astype(np.float32))
+    write_png(folder / f"{name}_rgb.png", to_srgb8(images["rgb"]))
+
+
+def run_render(
+    train_dir: Path, cameras_path: Path, out_dir: Path, *, environment: bool = False, downscale: int = 1,
+    device: str = "auto",
+) -> Path:
+    """Render every camera of ``cameras_path`` with the model of ``train_dir`` into ``out_dir`` (atomically)."""
+    from ..log import progress
+    from .train import load_model, resolve_device
+
+    started = time.time()
+    if downscale < 1:
+        raise InputError(f"downscale must be >= 1, got {downscale}")
+    cameras = load_cameras(cameras_path)
+    if len(cameras) == 0:
+        raise InputError("no cameras to render", cameras_path, "add cameras to the file")
+    model = load_model(train_dir, str(resolve_device(device)))
+    render = render_environment_view if environment else render_object_view
+    with atomic_dir(out_dir) as tmp, progress() as bar:
+        task = bar.add_task("render environment" if environment else "render object", total=len(cameras))
+        for cam in cameras.cameras:
+            write_views(tmp, cam.name, render(model, cam, downscale))
+            bar.advance(task)
+        save_cameras(tmp / "views.json", CameraSet(frame=cameras.frame, cameras=[
+            c.model_copy(update={"image": f"{c.name}_rgb.exr"}) for c in cameras.cameras]))
+        write_manifest(tmp, stage="render", inputs={"model": Path(train_dir) / "model.pt", "cameras": cameras_path},
+                       config={"environment": environment, "downscale": downscale}, started=started)
+    log.info("rendered %d %s view(s) -> %s (%.1f s)", len(cameras), "environment" if environment else "object",
+             out_dir, time.time() - started)
+    return out_dir
+
+
+EPILOG = """\
+examples:
+  orca render results/demo/train --cameras captures/demo/ground_truth/cameras.json --out results/demo/views
+  orca render results/demo/train --cameras captures/demo/ground_truth/environment/cameras.json \\
+              --environment --out results/demo/environment_views
+"""
+
+
+def register(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "render", help="render any cameras.json with a trained model (object or environment field) to EXR",
+        description=__doc__, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("train", type=Path, help="train stage folder (with model.pt)")
+    p.add_argument("--cameras", type=Path, required=True, help="cameras.json to render")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--environment", action="store_true", help="render the environment field alone (no object)")
+    p.add_argument("--downscale", type=int, default=1, help="integer image downscale")
+    p.add_argument("--device", choices=["auto", "cpu", "cuda"], default="auto")
+    p.set_defaults(func=main)
+
+
+def main(args: argparse.Namespace) -> Path:
+    return run_render(args.train, args.cameras, args.out, environment=args.environment,
+                      downscale=args.downscale, device=args.device)
