@@ -18,15 +18,19 @@ Definitions (every figure is per view; a mean is the mean over views of the per-
 - Normal MAE: over ground-truth mask pixels with a non-zero ground-truth normal; the predicted normal (an
   opacity-weighted sum) is normalized; where the model sees nothing (zero normal) the error counts as 90 deg.
 - Mask IoU: predicted opacity > 0.5 against the ground-truth mask.
-- PSNR: ``10 log10(peak^2 / MSE)`` on linear radiance over the region's pixels and channels, with a fixed
-  peak per view that does not depend on the prediction: the 99th percentile of the ground-truth *combined*
-  image over the object region (environment views: of the ground-truth RGB over all the view's pixels).
-  Diffuse, specular and combined of one view share that peak, so their PSNRs are on one scale (as in the
-  paper, where all three are images in one display range). MSE is floored so PSNR is capped at
-  :data:`PSNR_CAP_DB` (identical images).
-- SSIM (kornia, 11x11 Gaussian window, sigma 1.5): on images tone-mapped to sRGB in [0, 1] as
-  ``srgb(clip(x / peak, 0, 1))``, the mean of the SSIM map over the region's pixels and channels; outside the
-  region the prediction is replaced by the ground truth so that background in the window does not count.
+- PSNR peak: one fixed value, :data:`PSNR_PEAK` = 1 decoded unit, the white level of the capture's reference
+  exposure (the brightest value its photos, the model's training data, can hold). The same for every view,
+  component and method, so figures compare across all of them. (A per-view 99th percentile of the ground
+  truth was tried: on the demo it lands on the ceiling light's highlight, 2.4 on object views whose 95th
+  percentile is 0.15, and 25 on the environment view of the ceiling, moving PSNR by > 20 dB between views.)
+- ``psnr_*``: ``10 log10(peak^2 / MSE)`` on linear radiance, unclipped (HDR: light sources count fully),
+  over the region's pixels and channels. ``psnr_srgb_*``: the same on the tone-mapped images below with
+  peak 1, i.e. on what the camera would show (highlights clipped): the figure to set beside the paper's,
+  whose images are LDR. MSE is floored so PSNR is capped at :data:`PSNR_CAP_DB` (identical images).
+- Tone mapping (SSIM, sRGB PSNR, pictures): ``srgb(clip(x / peak, 0, 1))``.
+- SSIM (kornia, 11x11 Gaussian window, sigma 1.5): on tone-mapped images, the mean of the SSIM map over the
+  region's pixels and channels; outside the region the prediction is replaced by the ground truth so that
+  background in the window does not count.
 - Depth: AbsRel ``mean(|d - d_gt| / d_gt)`` and RMSE over pixels with finite ground-truth depth (and, for
   object views, inside the region); prop pixels: ground-truth points within :data:`PROP_MARGIN` of a prop.
 - ``downscale`` k renders at ``(H // k, W // k)`` with the intrinsics scaled (pixel centres map to the centres
@@ -39,8 +43,9 @@ Definitions (every figure is per view; a mean is the mean over views of the per-
 
 Writes ``OUT/`` atomically: ``evaluate.json`` (every figure per view and the means, what was compared,
 timing), ``object_grid.png`` and ``environment_grid.png`` (ground truth beside prediction), the predicted
-images (``<view>_rgb|diffuse|specular|normal|depth.exr`` and ``<view>_mask.png``; ``env_<view>_rgb|depth.exr``)
-and ``manifest.json``.
+images at the rendered size in decoded units and the ground-truth frame (``<view>_rgb|diffuse|specular|normal|
+depth.exr``, the normal as rendered: opacity-weighted, not normalized; ``<view>_mask.png``, opacity > 0.5;
+``env_<view>_rgb|depth.exr``) and ``manifest.json``.
 """
 
 from __future__ import annotations
@@ -65,18 +70,23 @@ log = logging.getLogger("orca.evaluate")
 
 EVALUATE_JSON = "evaluate.json"
 PSNR_CAP_DB = 100.0
-PSNR_PEAK_PERCENTILE = 99.0
+PSNR_PEAK = 1.0  # decoded units: the white level of the reference exposure (see the module doc)
+DISPLAY_PERCENTILE = 99.0
 SSIM_WINDOW = 11
 PROP_MARGIN = 0.05
 FALLBACK_ERODE_PX = 2
 GRID_OBJECT_VIEWS = 4
 
 OBJECT_METRICS = (
-    "normal_mae_deg", "mask_iou", "psnr_rgb", "ssim_rgb", "psnr_diffuse", "ssim_diffuse",
-    "psnr_specular", "ssim_specular", "depth_absrel", "depth_rmse",
+    "normal_mae_deg", "mask_iou",
+    "psnr_rgb", "psnr_srgb_rgb", "ssim_rgb",
+    "psnr_diffuse", "psnr_srgb_diffuse", "ssim_diffuse",
+    "psnr_specular", "psnr_srgb_specular", "ssim_specular",
+    "depth_absrel", "depth_rmse",
 )
 ENVIRONMENT_METRICS = (
-    "psnr", "ssim", "psnr_all", "ssim_all", "depth_absrel", "depth_rmse", "prop_depth_absrel", "prop_depth_rmse",
+    "psnr", "psnr_srgb", "ssim", "psnr_all", "psnr_srgb_all", "ssim_all",
+    "depth_absrel", "depth_rmse", "prop_depth_absrel", "prop_depth_rmse",
 )
 
 
@@ -99,9 +109,9 @@ def normal_angular_error(pred: np.ndarray, gt: np.ndarray, mask: np.ndarray) -> 
     return float(np.degrees(np.arccos(cos)).mean())
 
 
-def psnr_peak(gt: np.ndarray, mask: np.ndarray, percentile: float = PSNR_PEAK_PERCENTILE) -> float:
-    """The fixed PSNR peak of a view: the ``percentile`` of ``gt`` ``(H, W[, C])`` over ``mask`` pixels (all
-    channels). NaN for an empty mask or a non-positive percentile (a black image has no meaningful peak)."""
+def percentile_peak(gt: np.ndarray, mask: np.ndarray, percentile: float = DISPLAY_PERCENTILE) -> float:
+    """The ``percentile`` of ``gt`` ``(H, W[, C])`` over ``mask`` pixels (all channels): an automatic exposure
+    for pictures. NaN for an empty mask or a non-positive value (a black image has no meaningful peak)."""
     values = gt[np.asarray(mask, bool)]
     if values.size == 0:
         return float("nan")
@@ -109,7 +119,7 @@ def psnr_peak(gt: np.ndarray, mask: np.ndarray, percentile: float = PSNR_PEAK_PE
     return peak if peak > 0 else float("nan")
 
 
-def masked_psnr(pred: np.ndarray, gt: np.ndarray, mask: np.ndarray, peak: float) -> float:
+def masked_psnr(pred: np.ndarray, gt: np.ndarray, mask: np.ndarray, peak: float = PSNR_PEAK) -> float:
     """PSNR in dB of ``pred`` against ``gt`` (``(H, W[, C])``, linear) over the ``mask`` ``(H, W)`` pixels and
     all channels: ``10 log10(peak^2 / MSE)``, capped at :data:`PSNR_CAP_DB`. NaN for an empty mask or a
     non-finite peak."""
@@ -121,14 +131,21 @@ def masked_psnr(pred: np.ndarray, gt: np.ndarray, mask: np.ndarray, peak: float)
     return float(10 * np.log10(peak**2 / mse))
 
 
-def tone_map(linear: np.ndarray, peak: float) -> np.ndarray:
+def tone_map(linear: np.ndarray, peak: float = PSNR_PEAK) -> np.ndarray:
     """Linear radiance -> sRGB in [0, 1], ``peak`` mapped to white."""
     from ..imageio import linear_to_srgb
 
     return linear_to_srgb(np.asarray(linear, np.float32) / np.float32(peak))
 
 
-def masked_ssim(pred: np.ndarray, gt: np.ndarray, mask: np.ndarray, peak: float, window: int = SSIM_WINDOW) -> float:
+def masked_psnr_srgb(pred: np.ndarray, gt: np.ndarray, mask: np.ndarray, peak: float = PSNR_PEAK) -> float:
+    """PSNR of the tone-mapped images (:func:`tone_map` with ``peak``; the PSNR's own peak is then 1) over
+    the ``mask`` pixels: the error a viewer sees, highlights above ``peak`` clipped."""
+    return masked_psnr(tone_map(pred, peak), tone_map(gt, peak), mask, 1.0)
+
+
+def masked_ssim(pred: np.ndarray, gt: np.ndarray, mask: np.ndarray, peak: float = PSNR_PEAK,
+                window: int = SSIM_WINDOW) -> float:
     """Mean SSIM over the ``mask`` ``(H, W)`` pixels of ``pred`` and ``gt`` ``(H, W, 3)`` linear radiance,
     both tone-mapped with :func:`tone_map` (``peak`` -> white). Outside the mask ``pred`` is replaced by
     ``gt``. The window shrinks (odd) for images smaller than it. NaN for an empty mask or a bad peak."""
@@ -518,16 +535,16 @@ def evaluate_object_view(model, gt: GroundTruth, cam: Camera, downscale: int = 1
     }
     pred = render_object(model, cam, k, align)
     region, mask = truth["region"], truth["mask"]
-    peak = psnr_peak(truth["rgb"], region)
     figures: dict[str, Any] = {
         "normal_mae_deg": normal_angular_error(pred["normal"], truth["normal"], mask),
         "mask_iou": mask_iou(pred["opacity"] > 0.5, mask),
     }
     for part in ("rgb", "diffuse", "specular"):
-        figures[f"psnr_{part}"] = masked_psnr(pred[part], truth[part], region, peak)
-        figures[f"ssim_{part}"] = masked_ssim(pred[part], truth[part], region, peak)
+        figures[f"psnr_{part}"] = masked_psnr(pred[part], truth[part], region)
+        figures[f"psnr_srgb_{part}"] = masked_psnr_srgb(pred[part], truth[part], region)
+        figures[f"ssim_{part}"] = masked_ssim(pred[part], truth[part], region)
     depth = depth_errors(pred["depth"], truth["depth"], region)
-    figures.update(depth_absrel=depth["absrel"], depth_rmse=depth["rmse"], peak=peak,
+    figures.update(depth_absrel=depth["absrel"], depth_rmse=depth["rmse"],
                    pixels={"mask": int(mask.sum()), "region": int(region.sum()), "depth": depth["pixels"]},
                    region=region_how)
     return figures, pred, truth
@@ -547,16 +564,16 @@ def evaluate_environment_view(model, gt: GroundTruth, cam: Camera, downscale: in
     finite = np.isfinite(truth["depth"])
     everywhere = np.ones_like(finite)
     props = points_in_props(points_from_depth(truth["depth"], scaled_intrinsics(cam.K, k), cam.c2w), gt.props)
-    peak = psnr_peak(truth["rgb"], everywhere)
     depth, prop_depth = depth_errors(pred["depth"], truth["depth"]), depth_errors(pred["depth"], truth["depth"], props)
     figures = {
-        "psnr": masked_psnr(pred["rgb"], truth["rgb"], finite, peak),
-        "ssim": masked_ssim(pred["rgb"], truth["rgb"], finite, peak),
-        "psnr_all": masked_psnr(pred["rgb"], truth["rgb"], everywhere, peak),
-        "ssim_all": masked_ssim(pred["rgb"], truth["rgb"], everywhere, peak),
+        "psnr": masked_psnr(pred["rgb"], truth["rgb"], finite),
+        "psnr_srgb": masked_psnr_srgb(pred["rgb"], truth["rgb"], finite),
+        "ssim": masked_ssim(pred["rgb"], truth["rgb"], finite),
+        "psnr_all": masked_psnr(pred["rgb"], truth["rgb"], everywhere),
+        "psnr_srgb_all": masked_psnr_srgb(pred["rgb"], truth["rgb"], everywhere),
+        "ssim_all": masked_ssim(pred["rgb"], truth["rgb"], everywhere),
         "depth_absrel": depth["absrel"], "depth_rmse": depth["rmse"],
         "prop_depth_absrel": prop_depth["absrel"], "prop_depth_rmse": prop_depth["rmse"],
-        "peak": peak,
         "pixels": {"all": int(finite.size), "finite_depth": int(finite.sum()), "props": prop_depth["pixels"]},
     }
     truth["props"] = props
@@ -679,7 +696,7 @@ def _figure(rows: int, columns: int, aspect: float):
 
 def _display_peak(image: np.ndarray, mask: np.ndarray, fallback: float) -> float:
     """The 99th percentile of ``image`` over ``mask`` (the whole image if that is empty), else ``fallback``."""
-    p = psnr_peak(image, mask if mask.any() else np.ones(image.shape[:2], bool))
+    p = percentile_peak(image, mask if mask.any() else np.ones(image.shape[:2], bool))
     return p if math.isfinite(p) else (fallback if math.isfinite(fallback) and fallback > 0 else 1.0)
 
 
@@ -694,13 +711,14 @@ def _row_label(name: str, figures: dict[str, Any], keys: Sequence[tuple[str, str
 
 def object_grid(path: Path, rows: Sequence[tuple[str, dict, dict, dict]]) -> Path:
     """Rows (name, prediction, truth, figures) of GT combined | predicted | GT specular | predicted specular |
-    GT normals | predicted normals. Radiance is tone-mapped with the 99th percentile of the ground truth over
-    the object mask (specular: of the ground-truth specular), the same for truth and prediction."""
+    GT normals | predicted normals. Combined radiance is tone-mapped with the PSNR peak (as the camera saw
+    it); specular, much dimmer, with the 99th percentile of the ground-truth specular over the object mask
+    (the same for truth and prediction)."""
     columns = ["GT combined", "predicted", "GT specular", "pred. specular", "GT normals", "pred. normals"]
     h, w = rows[0][1]["opacity"].shape
     fig, axes = _figure(len(rows), len(columns), h / w)
     for r, (name, pred, truth, figures) in enumerate(rows):
-        peak = _display_peak(truth["rgb"], truth["mask"], 1.0)
+        peak = PSNR_PEAK
         spec_peak = _display_peak(truth["specular"], truth["mask"], peak)
         tiles = [tone_map(truth["rgb"], peak), tone_map(pred["rgb"], peak), tone_map(truth["specular"], spec_peak),
                  tone_map(pred["specular"], spec_peak), _normals_rgb(truth["normal"]), _normals_rgb(pred["normal"])]
@@ -708,7 +726,7 @@ def object_grid(path: Path, rows: Sequence[tuple[str, dict, dict, dict]]) -> Pat
             axes[r, c].imshow(tile, interpolation="nearest")
             if r == 0:
                 axes[r, c].set_title(columns[c], fontsize=9)
-        label = _row_label(name, figures, (("psnr_rgb", "PSNR {:.1f} dB"), ("psnr_specular", "spec. {:.1f} dB"),
+        label = _row_label(name, figures, (("psnr_srgb_rgb", "sRGB PSNR {:.1f} dB"), ("psnr_srgb_specular", "spec. {:.1f} dB"),
                                            ("normal_mae_deg", "normals {:.1f}°")))
         axes[r, 0].set_ylabel(label, fontsize=8)
     fig.savefig(path)
@@ -718,7 +736,7 @@ def object_grid(path: Path, rows: Sequence[tuple[str, dict, dict, dict]]) -> Pat
 def environment_grid(path: Path, rows: Sequence[tuple[str, dict, dict, dict]]) -> Path:
     """Rows (name, prediction, truth, figures) of GT rgb | predicted rgb | GT depth | predicted depth. All depth
     tiles share one colour scale (1st-99th percentile of every view's finite ground-truth depth), shown by a
-    colour bar on each row; RGB is tone-mapped with the view's PSNR peak."""
+    colour bar on each row; RGB is tone-mapped with the PSNR peak (as the camera would see it)."""
     columns = ["GT rgb", "predicted rgb", "GT depth", "predicted depth"]
     h, w = rows[0][1]["depth"].shape
     fig, axes = _figure(len(rows), len(columns), h / w)
@@ -726,14 +744,13 @@ def environment_grid(path: Path, rows: Sequence[tuple[str, dict, dict, dict]]) -
     lo, hi = np.percentile(finite, [1, 99]) if finite.size else (0.0, 1.0)
     hi = hi if hi > lo else lo + 1.0
     for r, (name, pred, truth, figures) in enumerate(rows):
-        peak = _display_peak(truth["rgb"], np.ones(truth["rgb"].shape[:2], bool), 1.0)
-        axes[r, 0].imshow(tone_map(truth["rgb"], peak), interpolation="nearest")
-        axes[r, 1].imshow(tone_map(pred["rgb"], peak), interpolation="nearest")
+        axes[r, 0].imshow(tone_map(truth["rgb"]), interpolation="nearest")
+        axes[r, 1].imshow(tone_map(pred["rgb"]), interpolation="nearest")
         gt_depth = np.where(np.isfinite(truth["depth"]), truth["depth"], np.nan)
         axes[r, 2].imshow(gt_depth, cmap="turbo", vmin=lo, vmax=hi, interpolation="nearest")
         im = axes[r, 3].imshow(pred["depth"], cmap="turbo", vmin=lo, vmax=hi, interpolation="nearest")
         fig.colorbar(im, ax=axes[r, 3], fraction=0.046, pad=0.02)
-        label = _row_label(name, figures, (("psnr_all", "PSNR {:.1f} dB"), ("depth_absrel", "AbsRel {:.2f}")))
+        label = _row_label(name, figures, (("psnr_srgb_all", "sRGB PSNR {:.1f} dB"), ("depth_absrel", "AbsRel {:.2f}")))
         axes[r, 0].set_ylabel(label, fontsize=8)
         if r == 0:
             for c, title in enumerate(columns):
@@ -756,14 +773,16 @@ def _json_safe(value: Any) -> Any:
     return value
 
 
+_PARTS = {"rgb": "combined", "diffuse": "diffuse", "specular": "specular"}
 _LABELS = {
     "normal_mae_deg": ("normal MAE", "deg", "lower"), "mask_iou": ("mask IoU", "", "higher"),
-    "psnr_rgb": ("PSNR combined", "dB", "higher"), "ssim_rgb": ("SSIM combined", "", "higher"),
-    "psnr_diffuse": ("PSNR diffuse", "dB", "higher"), "ssim_diffuse": ("SSIM diffuse", "", "higher"),
-    "psnr_specular": ("PSNR specular", "dB", "higher"), "ssim_specular": ("SSIM specular", "", "higher"),
+    **{f"psnr_{k}": (f"PSNR {v} (linear)", "dB", "higher") for k, v in _PARTS.items()},
+    **{f"psnr_srgb_{k}": (f"PSNR {v} (sRGB)", "dB", "higher") for k, v in _PARTS.items()},
+    **{f"ssim_{k}": (f"SSIM {v}", "", "higher") for k, v in _PARTS.items()},
     "depth_absrel": ("depth AbsRel", "", "lower"), "depth_rmse": ("depth RMSE", "units", "lower"),
-    "psnr": ("PSNR (finite depth)", "dB", "higher"), "ssim": ("SSIM (finite depth)", "", "higher"),
-    "psnr_all": ("PSNR (all pixels)", "dB", "higher"), "ssim_all": ("SSIM (all pixels)", "", "higher"),
+    "psnr": ("PSNR linear (finite depth)", "dB", "higher"), "psnr_srgb": ("PSNR sRGB (finite depth)", "dB", "higher"),
+    "ssim": ("SSIM (finite depth)", "", "higher"), "psnr_all": ("PSNR linear (all pixels)", "dB", "higher"),
+    "psnr_srgb_all": ("PSNR sRGB (all pixels)", "dB", "higher"), "ssim_all": ("SSIM (all pixels)", "", "higher"),
     "prop_depth_absrel": ("prop depth AbsRel", "", "lower"), "prop_depth_rmse": ("prop depth RMSE", "units", "lower"),
 }
 
@@ -778,7 +797,7 @@ def print_table(results: dict[str, Any]) -> None:
         res = results.get(part)
         if not res:
             continue
-        table = Table(title=f"evaluate: {title} (mean of {len(res['views'])}, downscale {res['downscale']})")
+        table = Table(title=f"{title}: mean of {len(res['views'])}, 1/{res['downscale']} size")
         table.add_column("metric")
         table.add_column("mean", justify="right")
         table.add_column("unit")
@@ -846,11 +865,12 @@ def run_evaluate(
         "to_ground_truth": align.matrix.tolist(), "trained_with_ground_truth_cameras": trained_on_gt,
         "radiance_to_decoded": gt.factor,
         "definitions": {
-            "psnr_peak": f"{PSNR_PEAK_PERCENTILE:g}th percentile of the ground-truth combined image over the "
-                         "object region (environment: of the ground-truth RGB over the whole view), per view; "
-                         f"PSNR capped at {PSNR_CAP_DB:g} dB",
-            "ssim": f"kornia SSIM ({SSIM_WINDOW}x{SSIM_WINDOW} Gaussian, sigma 1.5) on srgb(clip(x / peak)), mean "
-                    "over the region; prediction replaced by the ground truth outside it",
+            "psnr_peak": f"{PSNR_PEAK:g} decoded unit (the white level of the reference exposure) for every view "
+                         f"and component; PSNR capped at {PSNR_CAP_DB:g} dB",
+            "psnr": "linear radiance (decoded units), unclipped, over the region's pixels and channels",
+            "psnr_srgb": "the same on srgb(clip(x / peak, 0, 1)) images with peak 1 (highlights clipped)",
+            "ssim": f"kornia SSIM ({SSIM_WINDOW}x{SSIM_WINDOW} Gaussian, sigma 1.5) on srgb(clip(x / peak, 0, 1)), "
+                    "mean over the region; prediction replaced by the ground truth outside it",
             "object_region": "ground-truth interior pixels (coverage 255 eroded by the optics blur's 3 sigma), "
                              f"or the mask eroded by {FALLBACK_ERODE_PX} px without coverage/",
             "prop_pixels": f"ground-truth points within {PROP_MARGIN} of a scene.json prop",
