@@ -118,10 +118,18 @@ class HashGrid(nn.Module):
         self.register_buffer("_start", as_col(self.offsets[:-1]), persistent=False)
         self.register_buffer("_size", as_col(sizes), persistent=False)
         self.register_buffer("_dense", as_col(dense, torch.bool), persistent=False)
+        # Coarse-to-fine training (Neuralangelo): a weight per level, 1 = active. Saved with the model so
+        # a checkpoint renders as it trained.
+        self.register_buffer("level_weights", torch.ones(spec.levels))
 
     @property
     def out_dim(self) -> int:
         return self.spec.out_dim
+
+    def set_active_levels(self, levels: float) -> None:
+        """Enable the first ``levels`` levels (a fractional level is blended in); finer ones output zero."""
+        ramp = levels - torch.arange(self.spec.levels, dtype=self.level_weights.dtype, device=self.level_weights.device)
+        self.level_weights.copy_(ramp.clamp(0.0, 1.0))
 
     def forward(self, x: torch.Tensor, scale: torch.Tensor | None = None) -> torch.Tensor:
         """Encode points, optionally blurred to a footprint (Zip-NeRF's feature downweighting).
@@ -153,7 +161,7 @@ class HashGrid(nn.Module):
         # trilinear weights as the same outer product of per-axis (1 - frac, frac)
         a = torch.stack([1.0 - frac, frac], dim=-2)  # (N, L, 2, 3)
         w = (a[..., :, None, None, 0] * a[..., None, :, None, 1] * a[..., None, None, :, 2]).reshape(n, -1, 8)
-        feats = (w[..., None] * values).sum(-2)  # (N, L, F)
+        feats = (w[..., None] * values).sum(-2) * self.level_weights[:, None].to(x.dtype)  # (N, L, F)
         if scale is not None:
             feats = feats * torch.erf(1.0 / torch.sqrt(8 * (scale[:, None] * res[:, 0]).square() + 1e-12))[..., None]
         return feats.reshape(n, -1)

@@ -10,6 +10,7 @@ f_E(cone) of the paper; the 5D field queried along virtual cones from the object
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -49,6 +50,9 @@ class SDFFieldSpec:
     diffuse_hidden: int = 64
     diffuse_layers: int = 2
     init_radius: float = 0.5  # the initial sphere, in the unit-sphere frame of the object
+    # Initial diffuse radiance (linear). Softplus of a zero output is 0.69, far above most objects; the
+    # photometric loss then drives the head deep into softplus' flat tail, where it stops learning.
+    diffuse_init: float = 0.05
     bound: float = 1.0  # the SDF is modelled inside [-bound, bound]^3
 
 
@@ -68,6 +72,9 @@ class SDFField(nn.Module):
             self.net[-1].weight.mul_(1e-3)
             self.net[-1].bias.zero_()
         self.diffuse_net = mlp(spec.feature_dim + 3, spec.diffuse_hidden, spec.diffuse_layers, 3)
+        with torch.no_grad():
+            self.diffuse_net[-1].weight.mul_(0.1)
+            self.diffuse_net[-1].bias.fill_(math.log(math.expm1(spec.diffuse_init)))  # softplus⁻¹
 
     def encode(self, x: torch.Tensor) -> torch.Tensor:
         """``(N, 3)`` -> ``(N, enc_dim)``."""

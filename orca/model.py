@@ -26,6 +26,11 @@ class ModelSpec:
     render: RenderSpec = field(default_factory=RenderSpec)
     beta_init: float = 0.05
     beta_min: float = 1e-4  # keeps the density finite however sharp the surface gets
+    # Schedules over training progress p in [0, 1] (see OrcaModel.apply_schedule).
+    beta_final: float = 0.005  # β may not exceed beta_init -> beta_final (geometric) ...
+    beta_anneal: float = 0.5  # ... reached at this p; the learned β can always go lower
+    sdf_levels_start: int = 4  # coarse-to-fine: SDF hash-grid levels active at p = 0 ...
+    sdf_levels_full: float = 0.3  # ... all levels active from this p on
 
 
 class OrcaModel(nn.Module):
@@ -39,6 +44,21 @@ class OrcaModel(nn.Module):
     @property
     def beta(self) -> torch.Tensor:
         return self.spec.beta_min + self.log_beta.exp()
+
+    @torch.no_grad()
+    def apply_schedule(self, progress: float) -> None:
+        """Set the coarse-to-fine state for training progress ``progress`` in [0, 1]: the SDF's active
+        hash-grid levels (fine levels first fit noise, which becomes bumpy normals and a noisy reflection)
+        and the cap on β (a learned β alone shrinks slowly: the mask and photometric terms barely feel the
+        surface's sharpness, but the reflection needs a sharp, well-placed surface)."""
+        s = self.spec
+        grid = self.sdf_field.grid
+        if grid is not None:
+            ramp = min(progress / s.sdf_levels_full, 1.0) if s.sdf_levels_full > 0 else 1.0
+            grid.set_active_levels(s.sdf_levels_start + ramp * (grid.spec.levels - s.sdf_levels_start))
+        fraction = min(progress / s.beta_anneal, 1.0) if s.beta_anneal > 0 else 1.0
+        cap = s.beta_init * (s.beta_final / s.beta_init) ** fraction
+        self.log_beta.clamp_(max=math.log(max(cap - s.beta_min, 1e-12)))
 
     def forward(self, origins: torch.Tensor, dirs: torch.Tensor, radii: torch.Tensor) -> RayOutputs:
         """Object rays ``(N, 3), (N, 3), (N,)`` -> :class:`RayOutputs`."""

@@ -122,6 +122,10 @@ class TrainConfig(StrictModel):
     cone_method: Literal["closed_form", "bounding_rays", "naive"] = "closed_form"
     ior: float = Field(1.5, gt=1, description="index of refraction of the glossy coating (Fresnel)")
     beta_init: float = Field(0.05, gt=0)
+    beta_final: float = Field(0.005, gt=0, description="β is capped by a schedule from beta_init to this")
+    beta_anneal: float = Field(0.5, ge=0, le=1, description="fraction of training at which the cap reaches beta_final")
+    sdf_levels_start: int = Field(4, ge=1, description="coarse-to-fine: SDF hash-grid levels active at the start")
+    sdf_levels_full: float = Field(0.3, ge=0, le=1, description="fraction of training after which all levels are active")
     losses: LossConfig = Field(default_factory=LossConfig)
 
 

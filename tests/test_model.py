@@ -59,3 +59,34 @@ def test_warm_up_then_joint_steps_lower_mask_and_photometric_losses():
     assert final["photometric"] < 0.5 * history[15]["photometric"]
     # joint training must not undo the silhouettes (colour is compared per unit opacity)
     assert final["mask"] < history[0]["mask"]
+
+
+def test_schedule_opens_sdf_levels_coarse_to_fine_and_caps_beta():
+    model = _model()  # 4-level SDF grid, beta_init 0.05, beta_final 0.005 at half of training
+    spec = model.spec
+    model.apply_schedule(0.0)
+    weights = model.sdf_field.grid.level_weights
+    assert weights.tolist() == [1.0, 1.0, 1.0, 1.0]  # sdf_levels_start = 4: all of this small grid
+    model = OrcaModel(ModelSpec(sdf=SDFFieldSpec(hash_grid=GRID), sdf_levels_start=2, sdf_levels_full=0.5))
+    model.apply_schedule(0.0)
+    assert model.sdf_field.grid.level_weights.tolist() == [1.0, 1.0, 0.0, 0.0]
+    model.apply_schedule(0.125)  # a quarter of the ramp: half a level more
+    torch.testing.assert_close(model.sdf_field.grid.level_weights, torch.tensor([1.0, 1.0, 0.5, 0.0]))
+    model.apply_schedule(0.9)
+    assert model.sdf_field.grid.level_weights.tolist() == [1.0, 1.0, 1.0, 1.0]
+    # an inactive level contributes nothing: its table entries get no gradient
+    model.apply_schedule(0.0)
+    x = torch.rand(64, 3) * 0.5
+    model.sdf_field.sdf(x).sum().backward()
+    grid = model.sdf_field.grid
+    fine = slice(grid.offsets[2], grid.offsets[4])
+    assert grid.table.grad[fine].abs().max() == 0 and grid.table.grad[: grid.offsets[2]].abs().max() > 0
+    # β: capped on a geometric schedule, never raised
+    model = _model()
+    model.apply_schedule(0.25)
+    cap = spec.beta_init * (spec.beta_final / spec.beta_init) ** 0.5
+    torch.testing.assert_close(model.beta, torch.tensor(cap), rtol=1e-5, atol=0)
+    with torch.no_grad():
+        model.log_beta.fill_(-9.0)  # learned sharper than the cap: left alone
+    model.apply_schedule(0.3)
+    assert model.beta.item() < cap

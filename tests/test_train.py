@@ -70,6 +70,16 @@ def test_damaged_checkpoint_names_the_file(tmp_path):
         load_checkpoint(bad)
 
 
+def test_weights_of_another_network_version_are_a_clear_error(tmp_path):
+    from orca.model import OrcaModel
+    from pipeline.stages.train import load_weights, model_spec
+
+    model = OrcaModel(model_spec(_cfg()))
+    state = {"model": {k: v for k, v in model.state_dict().items() if "level_weights" not in k}}
+    with pytest.raises(InputError, match="--restart"):
+        load_weights(model, state, tmp_path / "model.pt")
+
+
 def test_nan_in_training_stops_with_a_clear_message(tiny_capture, tiny_decode, tmp_path, monkeypatch):
     from orca import data as data_module
 

@@ -65,6 +65,7 @@ import numpy as np
 from ..artifacts import atomic_dir, file_sha256, read_json, write_json, write_manifest
 from ..cameras import Camera, CameraSet, load_cameras
 from ..errors import InputError
+from .render import render_environment_view, render_object_view, write_views
 
 log = logging.getLogger("orca.evaluate")
 
@@ -458,23 +459,14 @@ def select_views(names: Sequence[str], views: int | Sequence[str] | None) -> lis
 # -------------------------------------------------------------------------------------------- rendering
 
 
-def _model_device(model):
-    return next(model.parameters()).device
+def _in_model_frame(cam: Camera, align: Alignment) -> Camera:
+    return cam.model_copy(update={"camera_to_world": align.camera_to_model(cam.c2w).tolist()})
 
 
 def render_object(model, cam: Camera, downscale: int, align: Alignment) -> dict[str, np.ndarray]:
-    """Render a ground-truth camera from the model, in ground-truth units and frame: ``rgb``, ``diffuse``,
-    ``specular``, ``normal`` ``(h, w, 3)``; ``opacity``, ``depth`` ``(h, w)``; h, w = size // downscale."""
-    import torch
-
-    from orca.imaging import render_object_image
-
-    dev = _model_device(model)
-    K = torch.tensor(scaled_intrinsics(cam.K, downscale), dtype=torch.float32, device=dev)
-    c2w = torch.tensor(align.camera_to_model(cam.c2w), dtype=torch.float32, device=dev)
-    with torch.no_grad():
-        out = render_object_image(model, K, c2w, cam.height // downscale, cam.width // downscale)
-    r = {k: v.float().cpu().numpy() for k, v in out.items()}
+    """Render a ground-truth camera from the model, in ground-truth units and frame (see
+    :func:`pipeline.stages.render.render_object_view`)."""
+    r = render_object_view(model, _in_model_frame(cam, align), downscale)
     r["normal"] = align.normals_to_ground_truth(r["normal"]).astype(np.float32)
     r["depth"] = align.depth_to_ground_truth(r["depth"]).astype(np.float32)
     return r
@@ -482,15 +474,7 @@ def render_object(model, cam: Camera, downscale: int, align: Alignment) -> dict[
 
 def render_environment(model, cam: Camera, downscale: int, align: Alignment) -> dict[str, np.ndarray]:
     """Render the environment field alone from a ground-truth camera: ``rgb`` ``(h, w, 3)``, ``depth``."""
-    import torch
-
-    from orca.imaging import render_environment_image
-
-    dev = _model_device(model)
-    K = torch.tensor(scaled_intrinsics(cam.K, downscale), dtype=torch.float32, device=dev)
-    c2w = torch.tensor(align.camera_to_model(cam.c2w), dtype=torch.float32, device=dev)
-    out = render_environment_image(model, K, c2w, cam.height // downscale, cam.width // downscale)
-    r = {k: v.float().cpu().numpy() for k, v in out.items()}
+    r = render_environment_view(model, _in_model_frame(cam, align), downscale)
     r["depth"] = align.depth_to_ground_truth(r["depth"]).astype(np.float32)
     return r
 
@@ -537,7 +521,7 @@ def evaluate_object_view(model, gt: GroundTruth, cam: Camera, downscale: int = 1
     region, mask = truth["region"], truth["mask"]
     figures: dict[str, Any] = {
         "normal_mae_deg": normal_angular_error(pred["normal"], truth["normal"], mask),
-        "mask_iou": mask_iou(pred["opacity"] > 0.5, mask),
+        "mask_iou": mask_iou(pred["mask"], mask),
     }
     for part in ("rgb", "diffuse", "specular"):
         figures[f"psnr_{part}"] = masked_psnr(pred[part], truth[part], region)
@@ -580,21 +564,6 @@ def evaluate_environment_view(model, gt: GroundTruth, cam: Camera, downscale: in
     return figures, pred, truth
 
 
-def _write_object_prediction(folder: Path, name: str, pred: dict[str, np.ndarray]) -> None:
-    from ..imageio import write_exr, write_png
-
-    for key in ("rgb", "diffuse", "specular", "normal", "depth"):
-        write_exr(folder / f"{name}_{key}.exr", pred[key])
-    write_png(folder / f"{name}_mask.png", np.where(pred["opacity"] > 0.5, 255, 0).astype(np.uint8))
-
-
-def _write_environment_prediction(folder: Path, name: str, pred: dict[str, np.ndarray]) -> None:
-    from ..imageio import write_exr
-
-    write_exr(folder / f"env_{name}_rgb.exr", pred["rgb"])
-    write_exr(folder / f"env_{name}_depth.exr", pred["depth"])
-
-
 def evaluate_object(model, gt_dir: Path, views: int | Sequence[str] | None = None, downscale: int = 1, *,
                     to_ground_truth: np.ndarray | None = None, save_dir: Path | None = None) -> dict[str, Any]:
     """Render the ground truth's object views from ``model`` and compare (see the module doc).
@@ -628,7 +597,7 @@ def evaluate_object(model, gt_dir: Path, views: int | Sequence[str] | None = Non
                 log.warning("view %s: no object region pixels at downscale %d; its radiance figures are NaN",
                             name, downscale)
             if save_dir is not None:
-                _write_object_prediction(save_dir, name, pred)
+                write_views(save_dir, name, pred)
                 if name in grid_names:
                     rows.append((name, pred, truth, figures))
             bar.advance(task)
@@ -669,7 +638,7 @@ def evaluate_environment(model, gt_dir: Path, views: int | Sequence[str] | None 
             figures, pred, truth = evaluate_environment_view(model, gt, cams[name], downscale, align)
             per_view[name] = figures
             if save_dir is not None:
-                _write_environment_prediction(save_dir, name, pred)
+                write_views(save_dir, f"env_{name}", pred)
                 rows.append((name, pred, truth, figures))
             bar.advance(task)
     seconds = time.time() - t0

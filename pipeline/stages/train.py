@@ -133,7 +133,8 @@ def model_spec(cfg: TrainConfig):
             band_samples=cfg.band_samples,
             env_samples=cfg.env_samples, cone_samples=cfg.cone_samples, cone_method=cfg.cone_method, ior=cfg.ior,
         ),
-        beta_init=cfg.beta_init,
+        beta_init=cfg.beta_init, beta_final=cfg.beta_final, beta_anneal=cfg.beta_anneal,
+        sdf_levels_start=cfg.sdf_levels_start, sdf_levels_full=cfg.sdf_levels_full,
     )
 
 
@@ -208,6 +209,15 @@ def load_checkpoint(path: Path) -> dict[str, Any]:
     if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
         raise InputError("not an ORCa checkpoint of this version", path, "pass --restart to train from scratch")
     return state
+
+
+def load_weights(model, state: dict[str, Any], path: Path) -> None:
+    """Load a checkpoint's weights; a file from an incompatible version of the code is a clear error."""
+    try:
+        model.load_state_dict(state["model"])
+    except RuntimeError as e:
+        raise InputError(f"the saved weights do not fit this version's network ({str(e).splitlines()[0]})", path,
+                         "retrain: `orca train ... --restart`") from e
 
 
 def _check_resumable(state: dict[str, Any], cfg: TrainConfig, path: Path) -> None:
@@ -296,7 +306,7 @@ def run_train(
     if existing:
         state = load_checkpoint(existing[-1])
         _check_resumable(state, cfg, existing[-1])
-        model.load_state_dict(state["model"])
+        load_weights(model, state, existing[-1])
         optimizer.load_state_dict(state["optimizer"])
         scheduler.load_state_dict(state["scheduler"])
         step = int(state["step"])
@@ -322,6 +332,7 @@ def run_train(
             task = bar.add_task("train", total=cfg.iterations, completed=step)
             while step < stop_at:
                 phase = "mask" if step < cfg.mask_warmup else "joint"
+                model.apply_schedule(step / cfg.iterations)
                 batch = data.sample(cfg.batch_rays, cfg.object_fraction, generator)
                 total, terms, out = objective(model, batch, weights, phase)
                 if not torch.isfinite(total):
@@ -406,7 +417,7 @@ def load_model(train_dir: Path, device: str = "cpu"):
     state = load_checkpoint(path)
     cfg = TrainConfig.model_validate_json(state["config"])
     model = OrcaModel(model_spec(cfg))
-    model.load_state_dict(state["model"])
+    load_weights(model, state, path)
     return model.to(device).eval()
 
 
