@@ -7,8 +7,10 @@ notebook calls), each writing one folder under results/<capture>/ atomically.
     snakemake --cores 8 --config captures='["mug"]' preset=standard
     snakemake --executor slurm ...                        # a cluster, through an executor plugin
 
+A synthetic capture (one with ground_truth/) is also evaluated against its ground truth.
+
 Config keys (all optional): captures (list of folder names under captures_dir), captures_dir, results_dir,
-preset (fast | standard | paper).
+preset (fast | standard | paper), set (a list of config overrides, e.g. '["train.iterations=500"]').
 """
 
 import shlex
@@ -21,7 +23,7 @@ from pipeline.stages.decode import find_photos
 # The `orca` CLI of the environment Snakemake itself runs in (no need for it to be on PATH).
 ORCA = f"{shlex.quote(sys.executable)} -m pipeline.cli"
 
-KNOWN_KEYS = {"captures", "captures_dir", "results_dir", "preset"}
+KNOWN_KEYS = {"captures", "captures_dir", "results_dir", "preset", "set"}
 unknown = set(config) - KNOWN_KEYS
 if unknown:
     raise ValueError(f"unknown Snakemake config key(s) {sorted(unknown)}; known: {sorted(KNOWN_KEYS)}")
@@ -32,6 +34,11 @@ if isinstance(CAPTURES, str):
 CAPTURES_DIR = Path(config.get("captures_dir", "captures"))
 RESULTS_DIR = Path(config.get("results_dir", "results"))
 PRESET = config.get("preset", "fast")
+# Config overrides for every stage, as `orca <stage> --set`: --config set='["train.iterations=500"]'
+OVERRIDES = config.get("set", [])
+if isinstance(OVERRIDES, str):
+    OVERRIDES = [OVERRIDES]
+SET = " ".join(f"--set {shlex.quote(str(o))}" for o in OVERRIDES)
 if PRESET not in PRESETS:
     raise ValueError(f"unknown preset {PRESET!r}; choose one of {', '.join(PRESETS)}")
 
@@ -60,9 +67,14 @@ def cameras_and_masks(wildcards):
     )
 
 
+def has_ground_truth(capture):
+    return (CAPTURES_DIR / capture / "ground_truth" / "scene.json").is_file()
+
+
 rule all:
     input:
         expand(RESULTS_DIR / "{capture}" / "train", capture=CAPTURES),
+        [RESULTS_DIR / c / "evaluate" for c in CAPTURES if has_ground_truth(c)],
 
 
 rule decode:
@@ -75,7 +87,7 @@ rule decode:
     log:
         RESULTS_DIR / "{capture}" / "logs" / "decode.log",
     shell:
-        "{ORCA} decode {CAPTURES_DIR}/{wildcards.capture} --out {output} --preset {PRESET} > {log} 2>&1"
+        "{ORCA} decode {CAPTURES_DIR}/{wildcards.capture} --out {output} --preset {PRESET} {SET} > {log} 2>&1"
 
 
 rule train:
@@ -92,4 +104,19 @@ rule train:
     threads: workflow.cores
     shell:
         "{ORCA} train --decode {input.decode} --cameras {input.cameras} --masks {input.masks} "
-        "--capture {CAPTURES_DIR}/{wildcards.capture} --out {output} --preset {PRESET} > {log} 2>&1"
+        "--capture {CAPTURES_DIR}/{wildcards.capture} --out {output} --preset {PRESET} {SET} > {log} 2>&1"
+
+
+rule evaluate:
+    """A synthetic capture's trained model against its ground truth: normals, diffuse / specular / combined,
+    environment views and their depth (8 object views at half size keep it minutes on a CPU)."""
+    input:
+        train=RESULTS_DIR / "{capture}" / "train",
+        ground_truth=CAPTURES_DIR / "{capture}" / "ground_truth",
+    output:
+        directory(RESULTS_DIR / "{capture}" / "evaluate"),
+    log:
+        RESULTS_DIR / "{capture}" / "logs" / "evaluate.log",
+    shell:
+        "{ORCA} evaluate {input.train} --ground-truth {input.ground_truth} --out {output} --views 8 "
+        "--downscale 2 > {log} 2>&1"

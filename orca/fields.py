@@ -49,6 +49,9 @@ class SDFFieldSpec:
     feature_dim: int = 15
     diffuse_hidden: int = 64
     diffuse_layers: int = 2
+    # A hash grid of its own for the diffuse head (None: SDF features only, as the paper). Texture detail
+    # then need not come from the SDF's grid, whose fine levels would turn it into bumpy normals.
+    texture_grid: HashGridSpec | None = None
     init_radius: float = 0.5  # the initial sphere, in the unit-sphere frame of the object
     # Initial diffuse radiance (linear). Softplus of a zero output is 0.69, far above most objects; the
     # photometric loss then drives the head deep into softplus' flat tail, where it stops learning.
@@ -71,16 +74,20 @@ class SDFField(nn.Module):
         with torch.no_grad():
             self.net[-1].weight.mul_(1e-3)
             self.net[-1].bias.zero_()
-        self.diffuse_net = mlp(spec.feature_dim + 3, spec.diffuse_hidden, spec.diffuse_layers, 3)
+        self.texture_grid = HashGrid(spec.texture_grid) if spec.texture_grid is not None else None
+        texture_dim = self.texture_grid.out_dim if self.texture_grid is not None else 0
+        self.diffuse_net = mlp(spec.feature_dim + 3 + texture_dim, spec.diffuse_hidden, spec.diffuse_layers, 3)
         with torch.no_grad():
             self.diffuse_net[-1].weight.mul_(0.1)
             self.diffuse_net[-1].bias.fill_(math.log(math.expm1(spec.diffuse_init)))  # softplus⁻¹
 
+    def _unit(self, x: torch.Tensor) -> torch.Tensor:
+        return (x / self.spec.bound + 1) * 0.5
+
     def encode(self, x: torch.Tensor) -> torch.Tensor:
         """``(N, 3)`` -> ``(N, enc_dim)``."""
         if self.grid is not None:
-            unit = (x / self.spec.bound + 1) * 0.5
-            return torch.cat([x, self.grid(unit)], dim=-1)
+            return torch.cat([x, self.grid(self._unit(x))], dim=-1)
         return positional_encoding(x, self.spec.num_freqs)
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -100,8 +107,15 @@ class SDFField(nn.Module):
         return self.forward(x)[0]
 
     def diffuse(self, x: torch.Tensor, features: torch.Tensor) -> torch.Tensor:
-        """View-independent linear diffuse radiance ``(N, 3)`` (non-negative, may exceed 1)."""
-        return F.softplus(self.diffuse_net(torch.cat([x, features], dim=-1)))
+        """View-independent linear diffuse radiance ``(N, 3)`` (non-negative, may exceed 1).
+
+        The SDF's features are layer-normalized first: the geometry terms alone (mask warm-up) let their
+        scale drift, and an unnormalized drift can push the head into softplus' flat tail for good.
+        """
+        parts = [x, F.layer_norm(features, features.shape[-1:])]
+        if self.texture_grid is not None:
+            parts.append(self.texture_grid(self._unit(x)))
+        return F.softplus(self.diffuse_net(torch.cat(parts, dim=-1)))
 
 
 @dataclass(frozen=True)

@@ -185,9 +185,12 @@ def render_rays(
     mid = 0.5 * (t[:, 1:] + t[:, :-1])  # (N, S)
     x = origins[:, None] + mid[..., None] * dirs[:, None]  # (N, S, 3)
     flat = x.reshape(-1, 3).detach().requires_grad_(True)
+    training = torch.is_grad_enabled()  # rendering under no_grad needs the normals, not their graph
     with torch.enable_grad():  # one pass gives the SDF, its features and (double-differentiable) gradient
         sdf, feats = sdf_field(flat)
-        (grad,) = torch.autograd.grad(sdf.sum(), flat, create_graph=True)
+        (grad,) = torch.autograd.grad(sdf.sum(), flat, create_graph=training)
+    if not training:
+        sdf, feats = sdf.detach(), feats.detach()
     s_count = mid.shape[1]
     density = volsdf_density(sdf.reshape(n, s_count), beta)
     w, _ = composite_weights(density, t)

@@ -103,6 +103,9 @@ class TrainConfig(StrictModel):
     grid_levels: int = Field(12, ge=1)
     grid_log2_table: int = Field(16, ge=8, le=24)
     grid_max_resolution: int = Field(1024, ge=16)
+    texture_levels: int = Field(12, ge=0, description="levels of the diffuse head's own hash grid (0: none, as the paper)")
+    texture_log2_table: int = Field(17, ge=8, le=24)
+    texture_max_resolution: int = Field(2048, ge=16)
     # environment
     env_encoding: Literal["hashgrid", "ipe", "direction"] = Field(
         "hashgrid", description="'direction': the 2D environment map ablation (radiance from direction only)"
@@ -140,7 +143,8 @@ PRESETS: dict[str, dict[str, Any]] = {
     "fast": {
         "train": {
             "iterations": 3000, "batch_rays": 512, "mask_warmup": 300, "checkpoint_every": 250,
-            "preview_every": 500, "grid_levels": 8, "grid_log2_table": 14, "grid_max_resolution": 256,
+            "preview_every": 500, "grid_levels": 8, "grid_log2_table": 14, "grid_max_resolution": 128,
+            "texture_levels": 8, "texture_log2_table": 15, "texture_max_resolution": 512,
             "env_grid_log2_table": 15, "n_coarse": 24, "n_fine": 8, "upsample_steps": 2, "band_samples": 16,
             "env_samples": 24,
             "cone_samples": 1,
@@ -152,6 +156,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     "paper": {
         "train": {
             "sdf_encoding": "frequency", "sdf_hidden": 256, "sdf_layers": 8, "env_encoding": "ipe", "band_samples": 0,
+            "texture_levels": 0,
             "env_hidden": 256, "env_layers": 8, "n_coarse": 64, "n_fine": 128, "env_samples": 128,
             "cone_samples": 4, "cone_method": "bounding_rays", "iterations": 200000, "batch_rays": 1024,
         },

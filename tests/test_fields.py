@@ -59,3 +59,17 @@ def test_directional_environment_map_ignores_position_and_has_no_depth():
     assert torch.isinf(depth).all() and (w == 0).all()
     other = env.radiance_at_infinity(torch.nn.functional.normalize(d + 0.5, dim=-1), spread)
     assert (other - rgb_a).abs().max() > 1e-4  # but it does depend on the direction
+
+
+def test_diffuse_head_reads_its_own_texture_grid_and_survives_feature_drift():
+    torch.manual_seed(0)
+    field = SDFField(SDFFieldSpec(hash_grid=SMALL_GRID, texture_grid=SMALL_GRID, diffuse_init=0.05))
+    x = torch.rand(32, 3) - 0.5
+    sdf, feats = field(x)
+    rgb = field.diffuse(x, feats)
+    torch.testing.assert_close(rgb, torch.full_like(rgb, 0.05), atol=0.03, rtol=0)  # starts at diffuse_init
+    rgb.sum().backward()
+    assert field.texture_grid.table.grad.abs().sum() > 0
+    # features a thousand times larger (what the mask warm-up can do to them) leave the output in range
+    drifted = field.diffuse(x, feats.detach() * 1000)
+    assert drifted.max() < 1.0 and drifted.min() > 1e-3

@@ -121,6 +121,8 @@ def model_spec(cfg: TrainConfig):
             hash_grid=HashGridSpec(levels=cfg.grid_levels, log2_table_size=cfg.grid_log2_table,
                                    max_resolution=cfg.grid_max_resolution),
             hidden=cfg.sdf_hidden, layers=cfg.sdf_layers, init_radius=cfg.sdf_init_radius, bound=bound,
+            texture_grid=HashGridSpec(levels=cfg.texture_levels, log2_table_size=cfg.texture_log2_table,
+                                      max_resolution=cfg.texture_max_resolution) if cfg.texture_levels else None,
         ),
         env=EnvironmentFieldSpec(
             encoding=cfg.env_encoding,
@@ -147,6 +149,7 @@ def loss_weights(cfg: TrainConfig):
 # Config keys that change the network's shape: a checkpoint is only resumable if these match.
 _ARCHITECTURE_KEYS = (
     "sdf_encoding", "sdf_hidden", "sdf_layers", "grid_levels", "grid_log2_table", "grid_max_resolution",
+    "texture_levels", "texture_log2_table", "texture_max_resolution",
     "env_encoding", "env_hidden", "env_layers", "env_grid_log2_table", "scene_radius",
 )
 
