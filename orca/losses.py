@@ -45,6 +45,13 @@ def normal_orientation_loss(weights: torch.Tensor, normals: torch.Tensor, dirs: 
     return (weights * facing_away.square()).sum(-1).mean()
 
 
+def normal_smoothness_loss(normals: torch.Tensor, nearby: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+    """Unit normals ``(N, 3)`` at surface points vs ``(N, 3)`` at points a small random step away, weighted
+    by ``(N,)`` (the ray's opacity): penalizes bumps finer than the step, which a hash grid's fine levels
+    otherwise fit to explain the reflections' detail."""
+    return (weights * (normals - nearby).square().sum(-1)).sum() / weights.sum().clamp_min(1e-8)
+
+
 def cone_distortion_loss(env_weights: torch.Tensor, env_s: torch.Tensor) -> torch.Tensor:
     """Distortion loss along virtual cones ``(N, K, E)`` with shared normalized edges ``(E + 1,)``."""
     return distortion_loss(env_weights, env_s.expand(*env_weights.shape[:-1], -1)).mean()

@@ -15,7 +15,15 @@ import torch
 from torch import nn
 
 from .fields import EnvironmentField, EnvironmentFieldSpec, SDFField, SDFFieldSpec
-from .losses import cone_distortion_loss, eikonal_loss, mask_loss, normal_orientation_loss, photometric_loss
+from .differential import gradient, normalize
+from .losses import (
+    cone_distortion_loss,
+    eikonal_loss,
+    mask_loss,
+    normal_orientation_loss,
+    normal_smoothness_loss,
+    photometric_loss,
+)
 from .render import RayOutputs, RenderSpec, render_environment_along, render_rays
 
 
@@ -83,6 +91,8 @@ class LossWeights:
     orientation: float = 1e-3
     distortion: float = 1e-3
     background: float = 0.5  # background pixels supervise the environment field directly (beyond the paper)
+    smoothness: float = 0.0  # normals at the surface vs a small random step away (beyond the paper)
+    smoothness_step: float = 0.01  # the step's standard deviation, in object radii
 
 
 class Batch(NamedTuple):
@@ -123,9 +133,21 @@ def objective(
         terms["photometric"] = photometric_loss(surface_rgb, batch.rgb, obj & batch.valid)
         terms["orientation"] = normal_orientation_loss(out.weights, normals, batch.dirs)
         terms["distortion"] = cone_distortion_loss(out.env_weights, out.env_s)
+        if weights.smoothness > 0:
+            terms["smoothness"] = smoothness_term(model, batch, out, weights.smoothness_step)
         if weights.background > 0 and (~obj).any():
             bg = ~obj & batch.valid
             env_rgb, _ = model.environment(batch.origins[bg], batch.dirs[bg], batch.radii[bg])
             terms["background"] = photometric_loss(env_rgb, batch.rgb[bg], torch.ones_like(bg[bg]))
     total = sum(getattr(weights, k) * v for k, v in terms.items())
     return total, {k: v.detach() for k, v in terms.items()}, out
+
+
+def smoothness_term(model: OrcaModel, batch: Batch, out: RayOutputs, step: float) -> torch.Tensor:
+    """:func:`normal_smoothness_loss` at each ray's expected surface point and a random step from it."""
+    surface = batch.origins + (out.depth / out.opacity.clamp_min(_OPACITY_EPS))[:, None] * batch.dirs
+    surface = surface.detach()
+    nearby = surface + step * torch.randn_like(surface)
+    _, g = gradient(model.sdf_field.sdf, torch.cat([surface, nearby]), create_graph=True)
+    n_surface, n_nearby = normalize(g).chunk(2)
+    return normal_smoothness_loss(n_surface, n_nearby, out.opacity.detach())

@@ -75,6 +75,8 @@ class LossConfig(StrictModel):
     orientation: float = Field(1e-3, ge=0)
     distortion: float = Field(1e-3, ge=0)
     background: float = Field(0.5, ge=0, description="background pixels supervise the environment field")
+    smoothness: float = Field(0.1, ge=0, description="normals at the surface vs a small random step away")
+    smoothness_step: float = Field(0.01, gt=0, description="that step's standard deviation (object radii)")
 
 
 class TrainConfig(StrictModel):
@@ -143,9 +145,9 @@ PRESETS: dict[str, dict[str, Any]] = {
     "fast": {
         "train": {
             "iterations": 3000, "batch_rays": 512, "mask_warmup": 300, "checkpoint_every": 250,
-            "preview_every": 500, "grid_levels": 8, "grid_log2_table": 14, "grid_max_resolution": 128,
-            "texture_levels": 8, "texture_log2_table": 15, "texture_max_resolution": 512,
-            "env_grid_log2_table": 15, "n_coarse": 24, "n_fine": 8, "upsample_steps": 2, "band_samples": 16,
+            "preview_every": 500, "grid_levels": 8, "grid_log2_table": 17, "grid_max_resolution": 128,
+            "texture_levels": 8, "texture_log2_table": 17, "texture_max_resolution": 512,
+            "env_grid_log2_table": 17, "n_coarse": 24, "n_fine": 8, "upsample_steps": 2, "band_samples": 16,
             "env_samples": 24,
             "cone_samples": 1,
         },
@@ -156,7 +158,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     "paper": {
         "train": {
             "sdf_encoding": "frequency", "sdf_hidden": 256, "sdf_layers": 8, "env_encoding": "ipe", "band_samples": 0,
-            "texture_levels": 0,
+            "texture_levels": 0, "losses": {"smoothness": 0.0},
             "env_hidden": 256, "env_layers": 8, "n_coarse": 64, "n_fine": 128, "env_samples": 128,
             "cone_samples": 4, "cone_method": "bounding_rays", "iterations": 200000, "batch_rays": 1024,
         },

@@ -19,6 +19,7 @@ from pipeline.stages.evaluate import (
     downscale_depth,
     mask_iou,
     masked_psnr,
+    masked_psnr_linear,
     masked_psnr_srgb,
     masked_ssim,
     normal_angular_error,
@@ -72,7 +73,7 @@ def test_psnr_and_ssim_count_only_masked_pixels():
     assert masked_psnr(bad, img, ~mask, 1.0) < 20
 
 
-def test_srgb_psnr_clips_highlights_and_linear_psnr_does_not():
+def test_sensor_psnrs_clip_highlights_and_the_raw_psnr_does_not():
     gt = _image()
     pred = gt.copy()
     gt[10, 10] = pred[10, 10] = 0.5
@@ -80,6 +81,7 @@ def test_srgb_psnr_clips_highlights_and_linear_psnr_does_not():
     mask = np.ones(gt.shape[:2], bool)
     assert masked_psnr_srgb(pred, gt, mask) == pytest.approx(PSNR_CAP_DB), "both clip to white: no visible error"
     assert masked_psnr(pred, gt, mask) == pytest.approx(10 * math.log10(1 / (36 * 3 / gt.size)), abs=1e-4)
+    assert masked_psnr_linear(pred, gt, mask) == pytest.approx(PSNR_CAP_DB), "the sensor saw white in both"
     worse = pred.copy()
     worse[10, 10] = 0.25
     assert masked_psnr_srgb(worse, gt, mask) < 60

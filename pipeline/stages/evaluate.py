@@ -23,8 +23,9 @@ Definitions (every figure is per view; a mean is the mean over views of the per-
   component and method, so figures compare across all of them. (A per-view 99th percentile of the ground
   truth was tried: on the demo it lands on the ceiling light's highlight, 2.4 on object views whose 95th
   percentile is 0.15, and 25 on the environment view of the ceiling, moving PSNR by > 20 dB between views.)
-- ``psnr_*``: ``10 log10(peak^2 / MSE)`` on linear radiance, unclipped (HDR: light sources count fully),
-  over the region's pixels and channels. ``psnr_srgb_*``: the same on the tone-mapped images below with
+- ``psnr_*``: ``10 log10(peak^2 / MSE)`` on linear radiance clipped to [0, peak], what the sensor records
+  (the photos clip there too, so a light source's true radiance above it was never observable), over the
+  region's pixels and channels. ``psnr_srgb_*``: the same on the tone-mapped images below with
   peak 1, i.e. on what the camera would show (highlights clipped): the figure to set beside the paper's,
   whose images are LDR. MSE is floored so PSNR is capped at :data:`PSNR_CAP_DB` (identical images).
 - Tone mapping (SSIM, sRGB PSNR, pictures): ``srgb(clip(x / peak, 0, 1))``.
@@ -130,6 +131,11 @@ def masked_psnr(pred: np.ndarray, gt: np.ndarray, mask: np.ndarray, peak: float 
     mse = float(np.mean((pred[sel].astype(np.float64) - gt[sel].astype(np.float64)) ** 2))
     mse = max(mse, peak**2 * 10 ** (-PSNR_CAP_DB / 10))
     return float(10 * np.log10(peak**2 / mse))
+
+
+def masked_psnr_linear(pred: np.ndarray, gt: np.ndarray, mask: np.ndarray, peak: float = PSNR_PEAK) -> float:
+    """:func:`masked_psnr` of linear radiance clipped to the sensor's range [0, ``peak``]."""
+    return masked_psnr(np.clip(pred, 0, peak), np.clip(gt, 0, peak), mask, peak)
 
 
 def tone_map(linear: np.ndarray, peak: float = PSNR_PEAK) -> np.ndarray:
@@ -524,7 +530,7 @@ def evaluate_object_view(model, gt: GroundTruth, cam: Camera, downscale: int = 1
         "mask_iou": mask_iou(pred["mask"], mask),
     }
     for part in ("rgb", "diffuse", "specular"):
-        figures[f"psnr_{part}"] = masked_psnr(pred[part], truth[part], region)
+        figures[f"psnr_{part}"] = masked_psnr_linear(pred[part], truth[part], region)
         figures[f"psnr_srgb_{part}"] = masked_psnr_srgb(pred[part], truth[part], region)
         figures[f"ssim_{part}"] = masked_ssim(pred[part], truth[part], region)
     depth = depth_errors(pred["depth"], truth["depth"], region)
@@ -550,10 +556,10 @@ def evaluate_environment_view(model, gt: GroundTruth, cam: Camera, downscale: in
     props = points_in_props(points_from_depth(truth["depth"], scaled_intrinsics(cam.K, k), cam.c2w), gt.props)
     depth, prop_depth = depth_errors(pred["depth"], truth["depth"]), depth_errors(pred["depth"], truth["depth"], props)
     figures = {
-        "psnr": masked_psnr(pred["rgb"], truth["rgb"], finite),
+        "psnr": masked_psnr_linear(pred["rgb"], truth["rgb"], finite),
         "psnr_srgb": masked_psnr_srgb(pred["rgb"], truth["rgb"], finite),
         "ssim": masked_ssim(pred["rgb"], truth["rgb"], finite),
-        "psnr_all": masked_psnr(pred["rgb"], truth["rgb"], everywhere),
+        "psnr_all": masked_psnr_linear(pred["rgb"], truth["rgb"], everywhere),
         "psnr_srgb_all": masked_psnr_srgb(pred["rgb"], truth["rgb"], everywhere),
         "ssim_all": masked_ssim(pred["rgb"], truth["rgb"], everywhere),
         "depth_absrel": depth["absrel"], "depth_rmse": depth["rmse"],
