@@ -10,7 +10,9 @@ import argparse
 import importlib
 import logging
 import os
+import signal
 import sys
+import threading
 
 # LibRaw (rawpy) and torch each bring an OpenMP runtime; spin-waiting threads of one starve the other when
 # a process loads both. Set before either library is imported.
@@ -47,10 +49,18 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _terminate(signum: int, frame: object) -> None:
+    """SIGTERM (a job scheduler or Snakemake stopping the job) unwinds like Ctrl-C: stages then checkpoint
+    and remove their temporary folders instead of dying mid-write."""
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     setup_logging(verbose=args.verbose)
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _terminate)
     try:
         args.func(args)
     except OrcaError as e:

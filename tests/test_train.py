@@ -52,6 +52,38 @@ def test_interrupted_training_resumes_from_its_checkpoint(tiny_capture, tiny_dec
     assert model.beta.item() > 0
 
 
+def test_a_terminated_orca_train_checkpoints_and_resumes(tiny_capture, tiny_decode, tmp_path):
+    """SIGTERM (what a scheduler sends) mid-training: a checkpoint at the step reached, exit code 130, and the
+    next run continues from there."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    gt = tiny_capture / "ground_truth"
+    out = tmp_path / "train"
+    overrides = [a for o in TINY if o.split("=")[0] not in ("train.iterations", "train.checkpoint_every")
+                 for a in ("--set", o)]
+    cmd = [sys.executable, "-m", "pipeline.cli", "train", "--decode", str(tiny_decode), "--ground-truth", str(gt),
+           "--out", str(out), "--preset", "fast", *overrides, "--set", "train.iterations=100000",
+           "--set", "train.checkpoint_every=100000"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    metrics = checkpoint_dir_for(out) / "metrics.jsonl"
+    deadline = time.time() + 120
+    while time.time() < deadline and not (metrics.is_file() and len(metrics.read_text().splitlines()) >= 3):
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGTERM)
+    output, _ = proc.communicate(timeout=60)
+    assert proc.returncode == 130, output[-2000:]
+    ckpts = sorted(checkpoint_dir_for(out).glob("step_*.pt"))
+    assert ckpts, "no checkpoint was written on SIGTERM"
+    step = load_checkpoint(ckpts[-1])["step"]
+    assert step >= 3 and not out.exists()
+    assert not list(tmp_path.rglob("*partial*")), "a temporary file was left behind"
+    resumed = run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, _cfg(f"train.iterations={step + 2}"))
+    assert resumed is not None and resumed.iterations == step + 2
+
+
 def test_changed_network_is_not_resumed_silently(tiny_capture, tiny_decode, tmp_path):
     gt = tiny_capture / "ground_truth"
     out = tmp_path / "train"
