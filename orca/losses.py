@@ -53,5 +53,5 @@ def normal_smoothness_loss(normals: torch.Tensor, nearby: torch.Tensor, weights:
 
 
 def cone_distortion_loss(env_weights: torch.Tensor, env_s: torch.Tensor) -> torch.Tensor:
-    """Distortion loss along virtual cones ``(N, K, E)`` with shared normalized edges ``(E + 1,)``."""
-    return distortion_loss(env_weights, env_s.expand(*env_weights.shape[:-1], -1)).mean()
+    """Distortion loss along virtual cones: weights ``(N, K, E)``, normalized edges ``(N, K, E + 1)``."""
+    return distortion_loss(env_weights, env_s).mean()

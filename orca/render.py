@@ -21,7 +21,7 @@ from .cones import virtual_cone
 from .differential import normalize, normals_and_curvature_fd
 from .fields import EnvironmentField, SDFField
 from .frustum import conical_frustum_gaussian
-from .sampling import ray_sphere_bounds, surface_band, upsample_to_surface
+from .sampling import ray_sphere_bounds, sample_pdf, surface_band, upsample_to_surface
 from .volume import composite_weights, volsdf_density
 
 
@@ -40,7 +40,8 @@ class RenderSpec:
     cone_samples: int = 2
     cone_method: ConeMethod = "closed_form"
     curvature_eps: float = 2e-3  # finite-difference step for the mean curvature at cone samples
-    env_samples: int = 48
+    env_samples: int = 48  # coarse samples along each cone (log-spaced) ...
+    env_fine: int = 0  # ... plus this many drawn from the coarse weights (coarse-to-fine; 0: one pass)
     env_near: float = 1e-2  # first environment sample past the surface (normalized units)
     env_far: float = 1e3  # the room may be far; the contraction keeps this finite
     ior: float = 1.5  # dielectric coating (Fresnel)
@@ -60,7 +61,7 @@ class RayOutputs(NamedTuple):
     weights: torch.Tensor  # (N, S)
     t: torch.Tensor  # (N, S + 1) interval edges
     env_weights: torch.Tensor  # (N, K, E) weights along the virtual cones (distortion loss)
-    env_s: torch.Tensor  # (E + 1,) normalized cone interval edges
+    env_s: torch.Tensor  # (N, K, E + 1) cone interval edges, normalized to [0, 1] (log distance)
 
 
 def fresnel_dielectric(cos_theta: torch.Tensor, ior: float) -> torch.Tensor:
@@ -77,14 +78,27 @@ def fresnel_dielectric(cos_theta: torch.Tensor, ior: float) -> torch.Tensor:
     return 0.5 * (rs.square() + rp.square())
 
 
-def environment_edges(spec: RenderSpec, dtype: torch.dtype, device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
-    """Distances past the surface along a virtual cone, log-spaced (near things get the samples they
-    need, far walls still get some), and the same edges normalized to [0, 1] for the distortion loss."""
+def environment_edges(spec: RenderSpec, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
+    """``(env_samples + 1,)`` coarse distances past the start of a cone, log-spaced (near things get the
+    samples they need, far walls still get some), starting exactly at 0."""
     s = torch.linspace(0, 1, spec.env_samples + 1, dtype=dtype, device=device)
+    u = torch.exp(math.log(spec.env_near) + s * (math.log(spec.env_far) - math.log(spec.env_near)))
+    return torch.cat([torch.zeros_like(u[:1]), u[1:]])
+
+
+def normalized_distance(u: torch.Tensor, spec: RenderSpec) -> torch.Tensor:
+    """Distances past a cone's start -> [0, 1] by the log spacing of :func:`environment_edges` (the
+    distortion loss's coordinate, in which every coarse interval has the same length)."""
     log_near, log_far = math.log(spec.env_near), math.log(spec.env_far)
-    u = torch.exp(log_near + s * (log_far - log_near))
-    u = torch.cat([torch.zeros_like(u[:1]), u[1:]])  # start exactly at the surface
-    return u, s
+    s = (torch.log(u.clamp_min(spec.env_near)) - log_near) / (log_far - log_near)
+    return torch.where(u > 0, s.clamp(0, 1), torch.zeros_like(s))
+
+
+def _frustums(env: EnvironmentField, apex, axis, radius_growth, t_start, u):
+    """Density and radiance of the frustums between edges ``u`` ``(M, E + 1)`` past ``t_start``."""
+    t = t_start[:, None] + u
+    means, variances = conical_frustum_gaussian(apex, axis, radius_growth, t[:, :-1], t[:, 1:])
+    return env(means, variances, axis)
 
 
 def render_environment_along(
@@ -101,22 +115,34 @@ def render_environment_along(
 
     Args:
         apex, axis: ``(M, 3)``; radius_growth, t_start: ``(M,)``.
+    Coarse-to-fine (``spec.env_fine > 0``): a first pass without gradients on the log-spaced edges places
+    ``env_fine`` more samples where its weights are (inverse CDF); the second pass renders coarse and fine
+    edges together, with gradients.
+
     Returns:
-        radiance ``(M, 3)``, depth past the start ``(M,)``, weights ``(M, E)``, normalized edges ``(E + 1,)``.
-        A directional (2D map) field gives infinite depth and zero weights.
+        radiance ``(M, 3)``, depth past the start ``(M,)``, weights ``(M, E)``, normalized edges
+        ``(M, E + 1)`` (E = env_samples + env_fine). A directional (2D map) field gives infinite depth and
+        zero weights.
     """
-    u, s = environment_edges(spec, apex.dtype, apex.device)
+    m = apex.shape[0]
+    u = environment_edges(spec, apex.dtype, apex.device).expand(m, -1)
     if env.directional:  # a 2D map: no depth, nothing along the cone to weigh
         rgb = env.radiance_at_infinity(axis, radius_growth)
         depth = torch.full_like(radius_growth, math.inf)
-        return rgb, depth, torch.zeros(apex.shape[0], spec.env_samples, dtype=apex.dtype, device=apex.device), s
-    t = t_start[:, None] + u  # (M, E + 1)
-    means, variances = conical_frustum_gaussian(apex, axis, radius_growth, t[:, :-1], t[:, 1:])
-    density, radiance = env(means, variances, axis)
-    w, _ = composite_weights(density, u.expand_as(t))
+        e = spec.env_samples + spec.env_fine
+        s = torch.linspace(0, 1, e + 1, dtype=apex.dtype, device=apex.device).expand(m, -1)
+        return rgb, depth, torch.zeros(m, e, dtype=apex.dtype, device=apex.device), s
+    if spec.env_fine > 0:
+        with torch.no_grad():
+            density, _ = _frustums(env, apex, axis, radius_growth, t_start, u)
+            w_coarse, _ = composite_weights(density, u)
+            fine = sample_pdf(u, w_coarse, spec.env_fine, deterministic=spec.deterministic)
+        u = torch.sort(torch.cat([u, fine], dim=-1), dim=-1).values
+    density, radiance = _frustums(env, apex, axis, radius_growth, t_start, u)
+    w, _ = composite_weights(density, u)
     rgb = (w[..., None] * radiance).sum(-2)
-    depth = (w * 0.5 * (u[1:] + u[:-1])).sum(-1)
-    return rgb, depth, w, s
+    depth = (w * 0.5 * (u[:, 1:] + u[:, :-1])).sum(-1)
+    return rgb, depth, w, normalized_distance(u, spec)
 
 
 def shade_specular(
@@ -136,7 +162,7 @@ def shade_specular(
         origins, dirs: ``(N, 3)``; radii: ``(N,)``.
         points, normals: ``(N, K, 3)``; curvature, share: ``(N, K)`` (share: each sample's weight).
     Returns:
-        specular ``(N, 3)``, cone weights ``(N, K, E)``, normalized cone edges ``(E + 1,)``.
+        specular ``(N, 3)``, cone weights ``(N, K, E)``, normalized cone edges ``(N, K, E + 1)``.
     """
     n, k = share.shape
     cone = virtual_cone(
@@ -150,7 +176,7 @@ def shade_specular(
     cos_i = (-(dirs[:, None] * normals).sum(-1)).abs()
     fresnel = fresnel_dielectric(cos_i, spec.ior)
     specular = ((share * fresnel)[..., None] * env_rgb.reshape(n, k, 3)).sum(1)
-    return specular, env_w.reshape(n, k, -1), env_s
+    return specular, env_w.reshape(n, k, -1), env_s.reshape(n, k, -1)
 
 
 def render_rays(
@@ -214,6 +240,6 @@ def render_rays(
     return RayOutputs(
         rgb=diffuse + specular, diffuse=diffuse, specular=specular, normal=normal_map, opacity=opacity,
         depth=depth, sdf_grad=grad.reshape(n, s_count, 3), weights=w, t=t,
-        env_weights=env_w.reshape(n, k, -1), env_s=env_s,
+        env_weights=env_w, env_s=env_s,
     )
 

@@ -122,7 +122,8 @@ class TrainConfig(StrictModel):
     band_samples: int = Field(
         32, ge=0, description="rendered samples in a band around the surface; 0: render every coarse and fine sample"
     )
-    env_samples: int = Field(48, ge=4)
+    env_samples: int = Field(48, ge=4, description="coarse samples along each virtual cone (log-spaced)")
+    env_fine: int = Field(32, ge=0, description="more samples from the coarse pass's weights (0: one pass)")
     cone_samples: int = Field(2, ge=1, description="top-weight primary samples that cast virtual cones")
     cone_method: Literal["closed_form", "bounding_rays", "naive"] = "closed_form"
     ior: float = Field(1.5, gt=1, description="index of refraction of the glossy coating (Fresnel)")
@@ -148,7 +149,7 @@ PRESETS: dict[str, dict[str, Any]] = {
             "preview_every": 500, "grid_levels": 8, "grid_log2_table": 17, "grid_max_resolution": 128,
             "texture_levels": 8, "texture_log2_table": 17, "texture_max_resolution": 512,
             "env_grid_log2_table": 17, "n_coarse": 24, "n_fine": 8, "upsample_steps": 2, "band_samples": 16,
-            "env_samples": 24,
+            "env_samples": 16, "env_fine": 16,
             "cone_samples": 1,
         },
     },
@@ -159,7 +160,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "train": {
             "sdf_encoding": "frequency", "sdf_hidden": 256, "sdf_layers": 8, "env_encoding": "ipe", "band_samples": 0,
             "texture_levels": 0, "losses": {"smoothness": 0.0},
-            "env_hidden": 256, "env_layers": 8, "n_coarse": 64, "n_fine": 128, "env_samples": 128,
+            "env_hidden": 256, "env_layers": 8, "n_coarse": 64, "n_fine": 128, "env_samples": 64, "env_fine": 128,
             "cone_samples": 4, "cone_method": "bounding_rays", "iterations": 200000, "batch_rays": 1024,
         },
     },

@@ -91,3 +91,36 @@ def test_photometric_loss_reaches_sdf_parameters_through_weights_and_reflection(
     out = render_rays(sdf, env, torch.tensor(0.01), o, d, r, SPEC)
     g_spec = torch.autograd.grad(out.specular.sum(), list(sdf.net.parameters()))
     assert sum(g.abs().sum() for g in g_spec) > 0
+
+
+class _Wall(torch.nn.Module):
+    """An analytic environment: empty space, then an opaque grey wall at x = ``at``."""
+
+    directional = False
+
+    def __init__(self, at: float):
+        super().__init__()
+        self.at = at
+
+    def forward(self, means, variances, dirs):
+        density = torch.where(means[..., 0] > self.at, 1e4, 0.0)
+        return density, torch.full((*means.shape[:-1], 3), 0.5)
+
+
+def test_coarse_to_fine_cone_sampling_finds_the_walls_depth():
+    from orca.render import render_environment_along
+
+    n = 64
+    wall = _Wall(at=3.0)
+    apex = torch.zeros(n, 3)
+    axis = torch.nn.functional.normalize(torch.tensor([1.0, 0.0, 0.0]) + 0.2 * torch.randn(n, 3), dim=-1)
+    truth = 3.0 / axis[:, 0]
+    errors = {}
+    for fine in (0, 16):
+        spec = RenderSpec(env_samples=16, env_fine=fine, deterministic=True)
+        rgb, depth, w, s = render_environment_along(wall, apex, axis, torch.full((n,), 1e-3), torch.zeros(n), spec)
+        assert w.shape == (n, 16 + fine) and s.shape == (n, 17 + fine)
+        assert (s[:, 1:] >= s[:, :-1]).all() and s[:, 0].eq(0).all() and s.max() <= 1
+        torch.testing.assert_close(rgb, torch.full_like(rgb, 0.5), atol=1e-3, rtol=0)  # the wall, fully opaque
+        errors[fine] = ((depth - truth).abs() / truth).mean().item()
+    assert errors[16] < 0.06 and errors[16] < 0.15 * errors[0], errors  # measured: 54 % -> 4.4 %
