@@ -11,18 +11,25 @@ from torch.nn import functional as F
 from .volume import distortion_loss
 
 
-def photometric_loss(pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
-    """Charbonnier-smoothed L1 on linear radiance over valid (object, unclipped) pixels.
+def photometric_loss(
+    pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor, clipped: torch.Tensor | None = None
+) -> torch.Tensor:
+    """Charbonnier-smoothed L1 on linear radiance over valid pixels, and a lower bound on clipped ones.
 
-    Linear radiance spans orders of magnitude (highlights); L1 keeps the bright few from dominating.
+    Linear radiance spans orders of magnitude (highlights); L1 keeps the bright few from dominating. A
+    clipped pixel's true radiance is at least what was recorded, so only a prediction below it is an error:
+    without this, the brightest highlights (light sources in the reflection) are never learned at all.
 
     Args:
-        pred, target: ``(N, 3)``; valid: ``(N,)`` bool.
+        pred, target: ``(N, 3)``; valid: ``(N,)`` bool (fitted); clipped: ``(N,)`` bool (bounded below).
     """
+    diff = torch.where(valid[:, None], pred - target, torch.zeros_like(pred))
+    if clipped is not None:
+        diff = torch.where(clipped[:, None], (pred - target).clamp(max=0.0), diff)
+        valid = valid | clipped
     if not valid.any():
         return pred.sum() * 0.0
-    diff = pred[valid] - target[valid]
-    return torch.sqrt(diff.square() + 1e-6).mean()
+    return torch.sqrt(diff[valid].square() + 1e-6).mean()
 
 
 def mask_loss(opacity: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:

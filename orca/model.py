@@ -130,15 +130,15 @@ def objective(
         # The surface's colour (radiance per unit opacity): otherwise the quickest way to darken a too-bright
         # start is to thin the surface, and the photometric term fights the silhouettes the mask term learns.
         surface_rgb = out.rgb / out.opacity.clamp_min(_OPACITY_EPS)[:, None]
-        terms["photometric"] = photometric_loss(surface_rgb, batch.rgb, obj & batch.valid)
+        terms["photometric"] = photometric_loss(surface_rgb, batch.rgb, obj & batch.valid, obj & ~batch.valid)
         terms["orientation"] = normal_orientation_loss(out.weights, normals, batch.dirs)
         terms["distortion"] = cone_distortion_loss(out.env_weights, out.env_s)
         if weights.smoothness > 0:
             terms["smoothness"] = smoothness_term(model, batch, out, weights.smoothness_step)
         if weights.background > 0 and (~obj).any():
-            bg = ~obj & batch.valid
+            bg = ~obj
             env_rgb, _ = model.environment(batch.origins[bg], batch.dirs[bg], batch.radii[bg])
-            terms["background"] = photometric_loss(env_rgb, batch.rgb[bg], torch.ones_like(bg[bg]))
+            terms["background"] = photometric_loss(env_rgb, batch.rgb[bg], batch.valid[bg], ~batch.valid[bg])
     total = sum(getattr(weights, k) * v for k, v in terms.items())
     return total, {k: v.detach() for k, v in terms.items()}, out
 

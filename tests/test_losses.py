@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pytest
 import torch
 
 from orca.losses import (
@@ -19,6 +20,19 @@ def test_photometric_loss_ignores_invalid_pixels():
     assert photometric_loss(pred, target, torch.tensor([True, False])) < 1e-2
     assert photometric_loss(pred, target, torch.tensor([True, True])) > 4.0
     assert photometric_loss(pred, target, torch.tensor([False, False])) == 0
+
+
+def test_clipped_pixels_bound_the_prediction_from_below():
+    target = torch.tensor([[1.0, 1.0, 1.0], [0.2, 0.2, 0.2]])
+    valid = torch.tensor([False, True])
+    clipped = torch.tensor([True, False])
+    exact = torch.tensor([[1.0, 1.0, 1.0], [0.2, 0.2, 0.2]])
+    brighter = torch.tensor([[5.0, 5.0, 5.0], [0.2, 0.2, 0.2]])  # a light source: brighter than recorded is fine
+    darker = torch.tensor([[0.3, 0.3, 0.3], [0.2, 0.2, 0.2]])  # a missed highlight is an error
+    at = lambda pred: photometric_loss(pred, target, valid, clipped).item()  # noqa: E731
+    assert at(brighter) == pytest.approx(at(exact), abs=1e-6)
+    assert at(darker) > at(exact) + 0.3
+    assert photometric_loss(darker, target, valid).item() == pytest.approx(at(exact), abs=1e-6)  # ignored if not passed
 
 
 def test_mask_loss_prefers_matching_opacity():
