@@ -152,9 +152,12 @@ def test_layout(sphere_capture: Path):
     for cam in env.cameras:
         assert (gt / "environment" / cam.image).is_file()
         assert (gt / "environment" / "depth" / Path(cam.image).name).is_file()
-    # nothing but the photos and ground_truth/ at the top level, no temporary leftovers beside it
+    # nothing but the photos, capture.yaml and ground_truth/ at the top level, no temporary leftovers beside it
     assert sorted(p.name for p in sphere_capture.iterdir()) == sorted(
-        ["ground_truth"] + [f"{n}.dng" for n in names] + [f"{n}.jpg" for n in names])
+        ["ground_truth", "capture.yaml"] + [f"{n}.dng" for n in names] + [f"{n}.jpg" for n in names])
+    from pipeline.config import load_config
+
+    assert load_config(sphere_capture / "capture.yaml").train.ior == SCENES["sphere"].object.int_ior
     assert not [p for p in sphere_capture.parent.iterdir() if p.name.startswith(".")]
     mask = read_image(gt / "masks" / f"{names[0]}.png")
     assert mask.shape == (SPHERE_OPTIONS.height, SPHERE_OPTIONS.width) and set(np.unique(mask)) <= {0, 255}
@@ -419,7 +422,7 @@ def test_cli_and_atomic_failure(tmp_path: Path, monkeypatch):
     args = parser.parse_args(["synth", "sphere", str(out), "--views", "2", "--width", "32", "--height", "24",
                               "--spp", "4", "--env-size", "8", "--format", "jpg", "--seed", "1"])
     args.func(args)
-    assert sorted(p.name for p in out.iterdir()) == ["IMG_0001.jpg", "IMG_0002.jpg", "ground_truth"]
+    assert sorted(p.name for p in out.iterdir()) == ["IMG_0001.jpg", "IMG_0002.jpg", "capture.yaml", "ground_truth"]
     assert load_cameras(out / "ground_truth" / "cameras.json").cameras[0].image == "../IMG_0001.jpg"
 
     with pytest.raises(InputError):  # no silent overwrite
