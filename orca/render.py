@@ -113,12 +113,12 @@ def render_environment_along(
 
     Used for virtual cones (apex behind the surface) and for ordinary camera cones (``t_start = 0``).
 
-    Args:
-        apex, axis: ``(M, 3)``; radius_growth, t_start: ``(M,)``.
     Coarse-to-fine (``spec.env_fine > 0``): a first pass without gradients on the log-spaced edges places
     ``env_fine`` more samples where its weights are (inverse CDF); the second pass renders coarse and fine
     edges together, with gradients.
 
+    Args:
+        apex, axis: ``(M, 3)``; radius_growth, t_start: ``(M,)``.
     Returns:
         radiance ``(M, 3)``, depth past the start ``(M,)``, weights ``(M, E)``, normalized edges
         ``(M, E + 1)`` (E = env_samples + env_fine). A directional (2D map) field gives infinite depth and
