@@ -27,8 +27,8 @@ COMMANDS: list[tuple[str, str]] = [
     ("synth", "pipeline.synth.cli"),
     ("decode", "pipeline.stages.decode"),
     ("train", "pipeline.stages.train"),
-    ("evaluate", "pipeline.stages.evaluate"),
     ("render", "pipeline.stages.render"),
+    ("evaluate", "pipeline.stages.evaluate"),
 ]
 
 log = logging.getLogger("orca")
