@@ -10,6 +10,7 @@ from orca.losses import (
     eikonal_loss,
     mask_loss,
     normal_orientation_loss,
+    normal_smoothness_loss,
     photometric_loss,
 )
 
@@ -61,3 +62,16 @@ def test_cone_distortion_loss_prefers_concentrated_weights():
     spike[..., 3] = 1.0
     spread = torch.full((2, 1, 8), 1 / 8)
     assert cone_distortion_loss(spike, s) < cone_distortion_loss(spread, s)
+
+
+def test_normal_smoothness_is_zero_on_a_plane_and_grows_with_bumps():
+    n = torch.nn.functional.normalize(torch.randn(64, 3), dim=-1)
+    ones = torch.ones(64)
+    assert normal_smoothness_loss(n, n, ones) == 0
+    tilt = torch.nn.functional.normalize(n + 0.1 * torch.randn(64, 3), dim=-1)
+    more = torch.nn.functional.normalize(n + 0.5 * torch.randn(64, 3), dim=-1)
+    assert 0 < normal_smoothness_loss(n, tilt, ones) < normal_smoothness_loss(n, more, ones)
+    # rays that miss (zero weight) do not count
+    weights = torch.cat([torch.ones(32), torch.zeros(32)])
+    mixed = torch.cat([n[:32], more[32:]])
+    assert normal_smoothness_loss(n, mixed, weights) == 0
