@@ -115,6 +115,9 @@ class TrainConfig(StrictModel):
     env_hidden: int = Field(64, ge=8)
     env_layers: int = Field(2, ge=1)
     env_grid_log2_table: int = Field(17, ge=8, le=24)
+    env_density_bias: float = Field(
+        -1.0, description="added to the environment field's density before softplus: how empty it starts"
+    )
     # rendering
     n_coarse: int = Field(48, ge=4)
     n_fine: int = Field(32, ge=0)

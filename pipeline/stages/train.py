@@ -128,7 +128,7 @@ def model_spec(cfg: TrainConfig):
             encoding=cfg.env_encoding,
             hash_grid=HashGridSpec(levels=12, log2_table_size=cfg.env_grid_log2_table, base_resolution=16,
                                    max_resolution=1024),
-            hidden=cfg.env_hidden, layers=cfg.env_layers,
+            hidden=cfg.env_hidden, layers=cfg.env_layers, density_bias=cfg.env_density_bias,
         ),
         render=RenderSpec(
             object_radius=cfg.scene_radius, n_coarse=cfg.n_coarse, n_fine=cfg.n_fine, upsample_steps=cfg.upsample_steps,
