@@ -141,6 +141,13 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = np.array([0.0,
     return m
 
 
+def scaled_intrinsics(K: np.ndarray, k: int) -> np.ndarray:
+    """Intrinsics of an image rendered k times smaller (pixel (0, 0) stays the top-left corner)."""
+    K = np.array(K, np.float64)
+    K[:2] /= k
+    return K
+
+
 def intrinsics_from_fov(width: int, height: int, fov_x_deg: float) -> tuple[float, float, float, float]:
     """(fx, fy, cx, cy) of a centred pinhole with horizontal field of view ``fov_x_deg``, square pixels."""
     fx = 0.5 * width / np.tan(np.deg2rad(fov_x_deg) / 2)

@@ -64,7 +64,7 @@ from typing import Any
 import numpy as np
 
 from ..artifacts import atomic_dir, file_sha256, read_json, write_json, write_manifest
-from ..cameras import Camera, CameraSet, load_cameras
+from ..cameras import Camera, CameraSet, load_cameras, scaled_intrinsics
 from ..errors import InputError
 from .render import render_environment_view, render_object_view, write_views
 
@@ -288,13 +288,6 @@ def downscale_normals(normals: np.ndarray, k: int) -> np.ndarray:
     mean = block_mean(normals, k)
     mean /= np.maximum(np.linalg.norm(mean, axis=-1, keepdims=True), 1e-12)
     return np.where(valid[..., None], mean, 0.0).astype(np.float32)
-
-
-def scaled_intrinsics(K: np.ndarray, k: int) -> np.ndarray:
-    """Intrinsics of an image rendered k times smaller (pixel (0, 0) stays the top-left corner)."""
-    K = np.array(K, np.float64)
-    K[:2] /= k
-    return K
 
 
 # ------------------------------------------------------------------------------------------------ frames

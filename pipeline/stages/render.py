@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from ..artifacts import atomic_dir, write_manifest
-from ..cameras import Camera, CameraSet, load_cameras, save_cameras
+from ..cameras import Camera, CameraSet, load_cameras, save_cameras, scaled_intrinsics
 from ..errors import InputError
 from ..imageio import to_srgb8, write_exr, write_png
 
@@ -31,10 +31,8 @@ OPACITY_THRESHOLD = 0.5  # the object mask, like the ground truth's coverage >= 
 def _camera_tensors(cam: Camera, downscale: int, device):
     import torch
 
-    K = cam.K.copy()
-    K[:2] /= downscale
     as_t = lambda a: torch.as_tensor(np.asarray(a, dtype=np.float32), device=device)  # noqa: E731
-    return as_t(K), as_t(cam.c2w), cam.height // downscale, cam.width // downscale
+    return as_t(scaled_intrinsics(cam.K, downscale)), as_t(cam.c2w), cam.height // downscale, cam.width // downscale
 
 
 def render_object_view(model, cam: Camera, downscale: int = 1) -> dict[str, np.ndarray]:
