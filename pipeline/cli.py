@@ -26,6 +26,7 @@ from .log import setup_logging
 COMMANDS: list[tuple[str, str]] = [
     ("synth", "pipeline.synth.cli"),
     ("decode", "pipeline.stages.decode"),
+    ("poses", "pipeline.stages.poses"),
     ("calibrate", "calibration.cli"),  # also registers `orca board`
     ("train", "pipeline.stages.train"),
     ("render", "pipeline.stages.render"),

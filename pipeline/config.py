@@ -66,6 +66,67 @@ class DecodeConfig(StrictModel):
         return v
 
 
+class PosesConfig(StrictModel):
+    """Camera poses and intrinsics (``orca poses``; see pipeline/stages/poses.py)."""
+
+    known_poses: Literal["auto", "ignore"] = Field(
+        "auto",
+        description="'auto': a capture folder's own cameras.json or transforms.json (turntable, phone AR) is used "
+        "and SfM is skipped; 'ignore': always run SfM.",
+    )
+    camera_model: Literal["auto", "SIMPLE_PINHOLE", "PINHOLE", "SIMPLE_RADIAL", "RADIAL", "OPENCV"] = Field(
+        "auto",
+        description="COLMAP camera model. 'auto': the calibration's OPENCV model (held fixed) when the capture has "
+        "calibration/calibration.json, else SIMPLE_RADIAL (one focal length, one radial term).",
+    )
+    refine_calibration: bool = Field(
+        False, description="let bundle adjustment refine calibrated intrinsics (normally they are held fixed)."
+    )
+    matcher: Literal["auto", "exhaustive", "sequential"] = Field(
+        "auto",
+        description="'exhaustive': every pair; 'sequential': each photo with its neighbours in file-name order "
+        "(wrapping around, as a capture circles the object); 'auto': exhaustive up to exhaustive_max_images.",
+    )
+    exhaustive_max_images: int = Field(60, ge=2, description="'auto' matches exhaustively up to this many photos.")
+    sequential_overlap: int = Field(
+        12, ge=1, description="'sequential': neighbours on each side, plus photos 2^k apart (loop closure)."
+    )
+    max_image_size: int = Field(
+        1600, ge=0, description="SIFT runs on images downscaled to this longest side (0: full size)."
+    )
+    max_num_features: int = Field(8192, ge=64, description="SIFT features kept per image.")
+    min_features: int = Field(
+        50, ge=1, description="an image with fewer SIFT features than this counts as featureless."
+    )
+    min_registered: int = Field(3, ge=2, description="fewer registered photos than this is an error.")
+    min_registered_fraction: float = Field(
+        0.75, gt=0, le=1, description="registering a smaller fraction of the photos than this is an error."
+    )
+    use_masks: bool = Field(
+        True,
+        description="with object masks (CAPTURE/masks/<name>.png or --masks; white = object), ignore features on "
+        "the glossy object (reflections move with the viewpoint) and take the object's sphere from the masks.",
+    )
+    mask_dilate_px: int = Field(4, ge=0, description="grow the object masks by this much before ignoring features.")
+    object_window: float = Field(
+        0.6,
+        gt=0,
+        le=1,
+        description="the object is assumed to lie inside this central fraction of every photo (width and height); "
+        "sparse points seen there from nearly all cameras are the object's (for its radius).",
+    )
+    radius_margin: float = Field(1.1, ge=1, description="the object's radius estimate is enlarged by this factor.")
+    undistort_threshold_px: float = Field(
+        0.1,
+        ge=0,
+        description="images are resampled to a pinhole camera only if the lens distortion moves some pixel by more "
+        "than this; below it, cameras.json points at the decoded images with the model's pinhole part.",
+    )
+    num_threads: int = Field(0, ge=0, description="CPU threads for pycolmap (0: all cores).")
+    seed: int = Field(0, ge=0, description="random seed of RANSAC and the mapper.")
+    keep_database: bool = Field(False, description="keep COLMAP's database.db (features, matches) in the output.")
+
+
 class LossConfig(StrictModel):
     """Weights of the training losses (see orca/model.py)."""
 
@@ -141,12 +202,14 @@ class TrainConfig(StrictModel):
 class PipelineConfig(StrictModel):
     preset: str = "standard"
     decode: DecodeConfig = Field(default_factory=DecodeConfig)
+    poses: PosesConfig = Field(default_factory=PosesConfig)
     train: TrainConfig = Field(default_factory=TrainConfig)
 
 
 PRESETS: dict[str, dict[str, Any]] = {
     # CPU, the demo capture, tests: small images, small networks.
     "fast": {
+        "poses": {"max_image_size": 1024},
         "train": {
             "iterations": 3000, "batch_rays": 512, "mask_warmup": 300, "checkpoint_every": 250,
             "preview_every": 500, "grid_levels": 8, "grid_log2_table": 17, "grid_max_resolution": 128,

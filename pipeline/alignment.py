@@ -1,0 +1,129 @@
+"""Similarity alignment of point sets and camera poses (Umeyama), and the errors measured after it.
+
+Used by the poses stage (to report how well known or refined cameras agree) and by ``orca evaluate``
+(poses against ground truth, which live in different frames). A similarity ``(s, R, t)`` maps a point
+``x`` to ``s * R @ x + t``; as a 4x4 matrix it is ``[[s R, t], [0, 1]]``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Similarity:
+    """``x -> scale * rotation @ x + translation``."""
+
+    scale: float
+    rotation: np.ndarray  # (3, 3), det +1
+    translation: np.ndarray  # (3,)
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """``(4, 4)`` homogeneous form."""
+        m = np.eye(4)
+        m[:3, :3] = self.scale * self.rotation
+        m[:3, 3] = self.translation
+        return m
+
+    @classmethod
+    def from_matrix(cls, m: np.ndarray) -> Similarity:
+        m = np.asarray(m, dtype=np.float64)
+        scale = float(np.cbrt(np.linalg.det(m[:3, :3])))
+        return cls(scale, m[:3, :3] / scale, m[:3, 3].copy())
+
+    def inverse(self) -> Similarity:
+        r_inv = self.rotation.T
+        return Similarity(1.0 / self.scale, r_inv, -(r_inv @ self.translation) / self.scale)
+
+    def apply(self, points: np.ndarray) -> np.ndarray:
+        """``(..., 3)`` points -> ``(..., 3)`` transformed points."""
+        return self.scale * np.asarray(points) @ self.rotation.T + self.translation
+
+    def apply_c2w(self, c2w: np.ndarray) -> np.ndarray:
+        """``(..., 4, 4)`` rigid camera-to-world matrices -> the same cameras in the target frame (still rigid:
+        the rotation is composed, the centre transformed; the scale only moves the centre)."""
+        c2w = np.asarray(c2w, dtype=np.float64)
+        out = c2w.copy()
+        out[..., :3, :3] = self.rotation @ c2w[..., :3, :3]
+        out[..., :3, 3] = self.apply(c2w[..., :3, 3])
+        return out
+
+
+def fit_similarity(src: np.ndarray, dst: np.ndarray, *, with_scale: bool = True) -> Similarity:
+    """Least-squares similarity with ``dst ~ s R src + t`` (Umeyama 1991).
+
+    Args:
+        src, dst: ``(N, 3)`` corresponding points, ``N >= 3`` not all collinear.
+        with_scale: ``False`` fits a rigid transform (``s = 1``).
+    """
+    src = np.asarray(src, dtype=np.float64)
+    dst = np.asarray(dst, dtype=np.float64)
+    if src.shape != dst.shape or src.ndim != 2 or src.shape[1] != 3:
+        raise ValueError(f"expected two (N, 3) arrays of the same shape, got {src.shape} and {dst.shape}")
+    if len(src) < 3:
+        raise ValueError(f"a similarity needs at least 3 point pairs, got {len(src)}")
+    mu_s, mu_d = src.mean(0), dst.mean(0)
+    xs, xd = src - mu_s, dst - mu_d
+    var_s = float((xs**2).sum() / len(src))
+    if var_s < 1e-300:
+        raise ValueError("source points all coincide")
+    cov = xd.T @ xs / len(src)
+    u, d, vt = np.linalg.svd(cov)
+    if d[1] < 1e-12 * max(d[0], 1e-300):
+        raise ValueError("points are collinear: the rotation about their line is undetermined")
+    sign = np.ones(3)
+    if np.linalg.det(u) * np.linalg.det(vt) < 0:  # a reflection fits better; take the best rotation instead
+        sign[2] = -1
+    r = u @ np.diag(sign) @ vt
+    s = float((d * sign).sum() / var_s) if with_scale else 1.0
+    t = mu_d - s * r @ mu_s
+    return Similarity(s, r, t)
+
+
+def rotation_angle_deg(r: np.ndarray) -> np.ndarray:
+    """``(..., 3, 3)`` rotations -> ``(...)`` their angles in degrees (numerically safe near 0 and 180)."""
+    r = np.asarray(r, dtype=np.float64)
+    cos = (np.trace(r, axis1=-2, axis2=-1) - 1) / 2
+    # arccos loses precision near 0; the skew part gives sin directly.
+    skew = np.stack([r[..., 2, 1] - r[..., 1, 2], r[..., 0, 2] - r[..., 2, 0], r[..., 1, 0] - r[..., 0, 1]], -1)
+    sin = np.linalg.norm(skew, axis=-1) / 2
+    return np.rad2deg(np.arctan2(sin, cos))
+
+
+@dataclass(frozen=True)
+class PoseErrors:
+    """Camera poses compared after aligning camera centres with a similarity."""
+
+    similarity: Similarity  # estimated frame -> reference frame
+    rotation_deg: np.ndarray  # (N,) angle between aligned and reference camera rotations
+    center: np.ndarray  # (N,) centre distance after alignment, reference units
+
+    def summary(self, scale: float = 1.0) -> dict[str, float]:
+        """Median/mean/max of both errors; centre errors also as a fraction of ``scale`` (e.g. orbit radius)."""
+        return {
+            "rotation_deg_median": float(np.median(self.rotation_deg)),
+            "rotation_deg_mean": float(self.rotation_deg.mean()),
+            "rotation_deg_max": float(self.rotation_deg.max()),
+            "center_median": float(np.median(self.center)),
+            "center_mean": float(self.center.mean()),
+            "center_max": float(self.center.max()),
+            "center_median_fraction": float(np.median(self.center) / scale),
+            "center_max_fraction": float(self.center.max() / scale),
+        }
+
+
+def compare_poses(c2w_est: np.ndarray, c2w_ref: np.ndarray) -> PoseErrors:
+    """Align estimated cameras to reference ones (similarity on centres) and measure what is left.
+
+    Args:
+        c2w_est, c2w_ref: ``(N, 4, 4)`` camera-to-world matrices of the same N cameras, OpenCV convention.
+    """
+    c2w_est = np.asarray(c2w_est, dtype=np.float64)
+    c2w_ref = np.asarray(c2w_ref, dtype=np.float64)
+    sim = fit_similarity(c2w_est[:, :3, 3], c2w_ref[:, :3, 3])
+    aligned = sim.apply_c2w(c2w_est)
+    rel = np.swapaxes(aligned[:, :3, :3], -1, -2) @ c2w_ref[:, :3, :3]
+    return PoseErrors(sim, rotation_angle_deg(rel), np.linalg.norm(aligned[:, :3, 3] - c2w_ref[:, :3, 3], axis=-1))

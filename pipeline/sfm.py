@@ -1,0 +1,390 @@
+"""Structure from motion with pycolmap: SIFT features, matching, incremental mapping, and the checks that
+turn COLMAP's silent failures into messages a photographer can act on.
+
+Glossy objects are where SfM fails in practice: reflections move with the viewpoint and make false matches,
+so few photos register or the model splits in two. The remedies are the same every time (more overlap,
+textured surroundings, locked exposure, masks on the object) and every error here says which applies.
+
+Images are named ``<name>.png`` inside COLMAP (the decode stage's sRGB PNGs); callers map them back.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .config import PosesConfig
+from .errors import InputError
+
+if TYPE_CHECKING:
+    import pycolmap
+
+log = logging.getLogger("orca.poses")
+
+# What helps when photos do not register, in the order a photographer can most easily do it.
+FIX_OVERLAP = (
+    "take the photos closer together (about 10-15 degrees apart as you walk around the object, each photo "
+    "overlapping its neighbours by two thirds), put textured things around the object (a newspaper, a patterned "
+    "cloth, posters) so the background has features, lock exposure and focus (AE/AF lock) so neighbouring photos "
+    "look alike, and give object masks (CAPTURE/masks/<name>.png) so reflections on the object are not matched"
+)
+
+
+@dataclass(frozen=True)
+class CameraGroup:
+    """Photos that share one COLMAP camera (same lens and zoom), and what we know of its intrinsics."""
+
+    names: tuple[str, ...]  # image stems
+    model: str  # COLMAP model name
+    params: tuple[float, ...] | None  # None: COLMAP's guess (focal 1.2 x the longest side)
+    source: str  # where the intrinsics come from, for the report
+    fixed: bool = False  # calibrated: bundle adjustment keeps them
+
+
+@dataclass
+class SfmResult:
+    """The largest model and what the run learned on the way (for the report and the error messages)."""
+
+    reconstruction: pycolmap.Reconstruction
+    model_sizes: list[int]  # registered images per model, largest first
+    other_models: list[list[str]]  # image stems of the models not chosen
+    features: dict[str, int]  # SIFT features per image stem
+    matcher: str
+    num_pairs: int  # image pairs matched
+    num_verified_pairs: int  # pairs with a verified two-view geometry
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+def colmap_name(name: str) -> str:
+    return f"{name}.png"
+
+
+def stem_of(colmap_image_name: str) -> str:
+    return colmap_image_name[:-4] if colmap_image_name.endswith(".png") else Path(colmap_image_name).stem
+
+
+def num_threads(config: PosesConfig) -> int:
+    return config.num_threads or (os.cpu_count() or 1)
+
+
+def quiet_colmap(verbose: bool) -> None:
+    """COLMAP logs every step through glog; keep its errors and our own summary unless debugging."""
+    import pycolmap
+
+    pycolmap.logging.minloglevel = 0 if verbose else 2
+
+
+# ------------------------------------------------------------------------------------- checks before SfM
+
+
+def check_not_identical(images: dict[str, np.ndarray], folder: Path, tolerance: float = 1.0) -> list[list[str]]:
+    """Stop when every photo shows the same picture; return groups of near-duplicates otherwise.
+
+    Args:
+        images: image stem -> ``(H, W, 3)`` uint8 sRGB.
+        tolerance: mean absolute difference of 32x24 grey thumbnails (8-bit levels) below which two photos
+            count as the same picture (sensor noise and JPEG artefacts stay well under it; a step of a few
+            degrees around an object moves far more).
+    """
+    import cv2
+
+    names = list(images)
+    thumbs = np.stack([
+        cv2.resize(cv2.cvtColor(images[n], cv2.COLOR_RGB2GRAY), (32, 24), interpolation=cv2.INTER_AREA)
+        for n in names
+    ]).astype(np.float32)
+    diff = np.abs(thumbs[:, None] - thumbs[None]).mean(axis=(2, 3))  # (N, N)
+    same = diff < tolerance
+    if len(names) > 1 and same.all():
+        raise InputError(
+            f"all {len(names)} photos show the same picture (mean difference of thumbnails "
+            f"{diff.max():.2f} levels): the camera did not move, so there is no parallax to find poses from",
+            folder,
+            fix="walk around the object between photos (burst mode or a tripod without moving it gives identical "
+            "photos); " + FIX_OVERLAP,
+        )
+    groups, seen = [], set()
+    for i, n in enumerate(names):
+        if n in seen:
+            continue
+        group = [names[j] for j in np.flatnonzero(same[i]) if names[j] not in seen]
+        seen.update(group)
+        if len(group) > 1:
+            groups.append(group)
+    return groups
+
+
+def check_features(features: dict[str, int], pixel_std: dict[str, float], config: PosesConfig, folder: Path) -> None:
+    """Stop when so many photos have no features that too few could ever register; warn about the others."""
+    poor = [n for n, k in features.items() if k < config.min_features]
+    if not poor:
+        return
+    usable = len(features) - len(poor)
+    needed = required_registered(len(features), config)
+    blank = [n for n in poor if pixel_std.get(n, 1.0) < 2.0]
+    detail = ", ".join(f"{n} ({features[n]})" for n in poor[:12]) + (" ..." if len(poor) > 12 else "")
+    what = (f"{len(blank)} of them are blank (one flat colour)" if blank else
+            "they are too dark, too blurred or show only plain surfaces")
+    if usable < needed:
+        raise InputError(
+            f"{len(poor)} of {len(features)} photos have (almost) no SIFT features (fewer than "
+            f"poses.min_features={config.min_features}): {detail}; {what}. At least {needed} photos with features "
+            "are needed",
+            folder,
+            fix="check that the photos are exposed and in focus (not black, white or blurred), lock exposure, and "
+            "photograph the object where the surroundings have texture (SfM finds the cameras from the "
+            "background, not from a glossy or plain object)",
+        )
+    log.warning("%d photo(s) have (almost) no SIFT features and will probably not register: %s", len(poor), detail)
+
+
+def required_registered(total: int, config: PosesConfig) -> int:
+    """How many photos must register for the stage to succeed."""
+    return min(total, max(config.min_registered, int(np.ceil(config.min_registered_fraction * total - 1e-9))))
+
+
+# ------------------------------------------------------------------------------------------------ pairing
+
+
+def sequential_pairs(names: Sequence[str], overlap: int, wrap: bool = True) -> list[tuple[str, str]]:
+    """Each photo with its ``overlap`` successors in file order, and with the photos 2^k ahead (COLMAP's
+    quadratic overlap, which closes loops cheaply). ``wrap``: the last photos also pair with the first ones,
+    as a capture that circles the object ends where it began."""
+    n = len(names)
+    steps = set(range(1, overlap + 1))
+    k = 1
+    while k < n:
+        steps.add(k)
+        k *= 2
+    pairs = set()
+    for i in range(n):
+        for s in steps:
+            j = i + s
+            if j >= n:
+                if not wrap:
+                    continue
+                j %= n
+            if i != j:
+                pairs.add((min(i, j), max(i, j)))
+    return [(names[i], names[j]) for i, j in sorted(pairs)]
+
+
+# -------------------------------------------------------------------------------------------------- SfM
+
+
+def run_sfm(
+    image_dir: Path,
+    groups: Sequence[CameraGroup],
+    work: Path,
+    config: PosesConfig,
+    *,
+    feature_masks: Path | None = None,
+    progress: Any = None,
+    folder: Path | None = None,
+) -> SfmResult:
+    """Features, matches and incremental mapping of the photos in ``groups`` (``image_dir/<name>.png``).
+
+    Args:
+        work: an empty folder for ``database.db`` and the models (``sparse/<k>``).
+        feature_masks: folder with ``<name>.png.png`` masks (0 = ignore features there), COLMAP's layout.
+        progress: a :func:`pipeline.log.progress` bar to advance while the mapper registers photos.
+        folder: the folder error messages name (default ``image_dir``), e.g. the capture's photo folder.
+
+    Raises:
+        InputError: no features, no initial pair, or too few photos registered (see the module doc).
+    """
+    import pycolmap
+
+    seconds: dict[str, float] = {}
+    folder = folder or image_dir
+    names = [n for g in groups for n in g.names]
+    db_path = work / "database.db"
+    threads = num_threads(config)
+    pycolmap.set_random_seed(config.seed)
+
+    t = time.time()
+    extraction = pycolmap.FeatureExtractionOptions()
+    extraction.num_threads = threads
+    extraction.max_image_size = config.max_image_size or -1
+    extraction.sift.max_num_features = config.max_num_features
+    for g in groups:
+        reader = pycolmap.ImageReaderOptions()
+        reader.camera_model = g.model
+        if g.params is not None:
+            reader.camera_params = ",".join(f"{p:.10g}" for p in g.params)  # also marks the focal as a prior
+        if feature_masks is not None:
+            reader.mask_path = str(feature_masks)
+        pycolmap.extract_features(
+            db_path, image_dir, image_names=[colmap_name(n) for n in g.names], camera_mode=pycolmap.CameraMode.SINGLE,
+            reader_options=reader, extraction_options=extraction, device=pycolmap.Device.auto,
+        )
+    features = _feature_counts(db_path)
+    seconds["features"] = time.time() - t
+    log.info("SIFT: %d photos, %d-%d features each (median %d) [%.1f s]", len(names), min(features.values()),
+             max(features.values()), int(np.median(list(features.values()))), seconds["features"])
+    pixel_std = {n: float(np.std(_read_gray(image_dir / colmap_name(n)))) for n, k in features.items()
+                 if k < config.min_features}
+    check_features(features, pixel_std, config, folder)
+
+    t = time.time()
+    matcher = config.matcher
+    if matcher == "auto":
+        matcher = "exhaustive" if len(names) <= config.exhaustive_max_images else "sequential"
+    matching = pycolmap.FeatureMatchingOptions()
+    matching.num_threads = threads
+    verification = pycolmap.TwoViewGeometryOptions()
+    verification.ransac.random_seed = config.seed
+    if matcher == "exhaustive":
+        num_pairs = len(names) * (len(names) - 1) // 2
+        pycolmap.match_exhaustive(db_path, matching_options=matching, verification_options=verification,
+                                  device=pycolmap.Device.auto)
+    else:
+        ordered = sorted(names)
+        pairs = sequential_pairs(ordered, config.sequential_overlap)
+        num_pairs = len(pairs)
+        pair_file = work / "pairs.txt"
+        pair_file.write_text("".join(f"{colmap_name(a)} {colmap_name(b)}\n" for a, b in pairs))
+        pairing = pycolmap.ImportedPairingOptions()
+        pairing.match_list_path = str(pair_file)
+        pycolmap.match_image_pairs(db_path, matching_options=matching, pairing_options=pairing,
+                                   verification_options=verification, device=pycolmap.Device.auto)
+    num_verified = _verified_pairs(db_path)
+    seconds["matching"] = time.time() - t
+    log.info("matching (%s): %d pairs, %d with a verified geometry [%.1f s]", matcher, num_pairs, num_verified,
+             seconds["matching"])
+
+    t = time.time()
+    options = _mapper_options(config, groups, threads, len(names))
+    sparse = work / "sparse"
+    sparse.mkdir()
+    task = progress.add_task("register photos", total=len(names)) if progress is not None else None
+
+    def next_image() -> None:
+        if progress is not None:
+            progress.advance(task)
+
+    models = pycolmap.incremental_mapping(db_path, image_dir, sparse, options, next_image_callback=next_image)
+    seconds["mapping"] = time.time() - t
+    ranked = sorted(models.values(), key=lambda r: r.num_reg_images(), reverse=True)
+    if not ranked:
+        raise _no_model_error(db_path, names, features, num_verified, folder)
+    best = ranked[0]
+    others = [sorted(stem_of(im.name) for im in r.images.values() if im.has_pose) for r in ranked[1:]]
+    result = SfmResult(best, [r.num_reg_images() for r in ranked], others, features, matcher, num_pairs,
+                       num_verified, seconds)
+    _check_registered(result, names, config, folder)
+    return result
+
+
+def _mapper_options(config: PosesConfig, groups: Sequence[CameraGroup], threads: int, n: int):
+    import pycolmap
+
+    options = pycolmap.IncrementalPipelineOptions()
+    options.num_threads = threads
+    options.random_seed = config.seed
+    options.mapper.random_seed = config.seed
+    options.triangulation.random_seed = config.seed
+    options.multiple_models = True  # to tell the user when and where the capture splits
+    options.min_model_size = min(n, max(3, config.min_registered))  # COLMAP drops models under 10 by default
+    options.extract_colors = True
+    if any(g.fixed for g in groups):
+        # Calibrated intrinsics are better than what bundle adjustment can get from an object capture.
+        options.ba_refine_focal_length = False
+        options.ba_refine_principal_point = False
+        options.ba_refine_extra_params = False
+        options.mapper.abs_pose_refine_focal_length = False
+        options.mapper.abs_pose_refine_extra_params = False
+    return options
+
+
+def _feature_counts(db_path: Path) -> dict[str, int]:
+    import pycolmap
+
+    db = pycolmap.Database.open(db_path)
+    try:
+        return {stem_of(im.name): db.num_keypoints_for_image(im.image_id) for im in db.read_all_images()}
+    finally:
+        db.close()
+
+
+def _verified_pairs(db_path: Path) -> int:
+    import pycolmap
+
+    db = pycolmap.Database.open(db_path)
+    try:
+        return int(db.num_verified_image_pairs())
+    finally:
+        db.close()
+
+
+def _read_gray(path: Path) -> np.ndarray:
+    import cv2
+
+    img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    return img if img is not None else np.zeros((1, 1), np.uint8)
+
+
+def _no_model_error(db_path: Path, names: list[str], features: dict[str, int], num_verified: int,
+                    folder: Path) -> InputError:
+    """Why the mapper could not start: the best-matched pair and how far its matches moved."""
+    import pycolmap
+
+    db = pycolmap.Database.open(db_path)
+    try:
+        id_to_name = {im.image_id: stem_of(im.name) for im in db.read_all_images()}
+        pair_ids, geometries = db.read_two_view_geometries()
+        best, best_n, motion = None, 0, None
+        for pid, g in zip(pair_ids, geometries):
+            k = len(g.inlier_matches)
+            if k > best_n:
+                i, j = pycolmap.pair_id_to_image_pair(pid)
+                best, best_n = (id_to_name[i], id_to_name[j]), k
+                ki, kj = db.read_keypoints(i), db.read_keypoints(j)
+                m = np.asarray(g.inlier_matches)
+                motion = float(np.median(np.linalg.norm(ki[m[:, 0], :2] - kj[m[:, 1], :2], axis=1)))
+    finally:
+        db.close()
+    if best is None:
+        detail = (f"no two of the {len(names)} photos share enough matching features "
+                  f"({num_verified} verified pairs; features per photo: median {int(np.median(list(features.values())))})")
+    else:
+        detail = (f"no pair of photos has enough matches seen from different enough viewpoints to start a model "
+                  f"(best pair {best[0]} & {best[1]}: {best_n} matches moving {motion:.1f} px)")
+        if motion is not None and motion < 2.0:
+            detail += "; the matched features barely move between photos, so the camera hardly moved"
+    return InputError(f"SfM found no model: {detail}", folder, fix=FIX_OVERLAP)
+
+
+def _check_registered(result: SfmResult, names: list[str], config: PosesConfig, folder: Path) -> None:
+    registered = {stem_of(im.name) for im in result.reconstruction.images.values() if im.has_pose}
+    needed = required_registered(len(names), config)
+    missing = sorted(set(names) - registered)
+    if len(result.model_sizes) > 1:
+        log.warning("SfM split the capture into %d models (%s photos); using the largest. Photos in the others: %s",
+                    len(result.model_sizes), " + ".join(map(str, result.model_sizes)),
+                    "; ".join(", ".join(m) for m in result.other_models))
+    if len(registered) >= needed:
+        if missing:
+            log.warning("%d of %d photos did not register and get no camera: %s", len(missing), len(names),
+                        ", ".join(missing))
+        return
+    split = ""
+    if len(result.model_sizes) > 1:
+        split = (f" SfM split the capture into {len(result.model_sizes)} models of "
+                 f"{' + '.join(map(str, result.model_sizes))} photos (the overlap between them is too weak; "
+                 f"photos of the second: {', '.join(result.other_models[0][:10])}).")
+    shown = ", ".join(missing[:20]) + (" ..." if len(missing) > 20 else "")
+    raise InputError(
+        f"only {len(registered)} of {len(names)} photos registered, at least {needed} needed "
+        f"(poses.min_registered={config.min_registered}, poses.min_registered_fraction="
+        f"{config.min_registered_fraction}). Not registered: {shown}.{split}",
+        folder,
+        fix=FIX_OVERLAP + "; or, to accept fewer photos, lower poses.min_registered_fraction",
+    )

@@ -1,0 +1,63 @@
+"""pipeline.alignment: Umeyama similarity and pose errors on known transforms."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.alignment import Similarity, compare_poses, fit_similarity, rotation_angle_deg
+from pipeline.cameras import look_at
+
+
+def random_rotation(rng: np.random.Generator) -> np.ndarray:
+    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+    q *= np.sign(np.diag(r))
+    return q if np.linalg.det(q) > 0 else -q
+
+
+def test_fit_similarity_recovers_a_known_similarity():
+    rng = np.random.default_rng(0)
+    truth = Similarity(2.7, random_rotation(rng), rng.normal(size=3) * 5)
+    src = rng.normal(size=(20, 3))
+    fit = fit_similarity(src, truth.apply(src))
+    assert fit.scale == pytest.approx(2.7, rel=1e-12)
+    np.testing.assert_allclose(fit.rotation, truth.rotation, atol=1e-12)
+    np.testing.assert_allclose(fit.translation, truth.translation, atol=1e-10)
+    np.testing.assert_allclose(fit.inverse().apply(truth.apply(src)), src, atol=1e-10)
+    np.testing.assert_allclose(Similarity.from_matrix(fit.matrix).matrix, fit.matrix, atol=1e-12)
+
+
+def test_fit_similarity_with_noise_and_rigid_mode():
+    rng = np.random.default_rng(1)
+    truth = Similarity(1.0, random_rotation(rng), rng.normal(size=3))
+    src = rng.normal(size=(200, 3))
+    dst = truth.apply(src) + rng.normal(scale=1e-3, size=src.shape)
+    fit = fit_similarity(src, dst, with_scale=False)
+    assert fit.scale == 1.0
+    assert rotation_angle_deg(fit.rotation.T @ truth.rotation) < 0.01
+
+
+def test_fit_similarity_refuses_degenerate_input():
+    with pytest.raises(ValueError, match="at least 3"):
+        fit_similarity(np.zeros((2, 3)), np.zeros((2, 3)))
+    line = np.outer(np.arange(5.0), [1, 2, 3])
+    with pytest.raises(ValueError, match="collinear"):
+        fit_similarity(line, line)
+
+
+def test_rotation_angle_is_accurate_near_zero_and_180():
+    for deg in (1e-6, 0.1, 90.0, 179.9, 180.0):
+        a = np.deg2rad(deg)
+        r = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+        assert rotation_angle_deg(r) == pytest.approx(deg, rel=1e-6, abs=1e-9)
+
+
+def test_compare_poses_is_zero_for_the_same_cameras_in_another_frame():
+    rng = np.random.default_rng(2)
+    c2w = np.stack([look_at(rng.normal(size=3) * 4, np.zeros(3)) for _ in range(8)])
+    sim = Similarity(0.3, random_rotation(rng), rng.normal(size=3))
+    err = compare_poses(sim.apply_c2w(c2w), c2w)
+    assert err.rotation_deg.max() < 1e-6 and err.center.max() < 1e-9
+    assert err.similarity.scale == pytest.approx(1 / 0.3)
+    s = err.summary(scale=4.0)
+    assert s["center_max_fraction"] < 1e-9
