@@ -29,6 +29,8 @@ COMMANDS: list[tuple[str, str]] = [
     ("poses", "pipeline.stages.poses"),
     ("calibrate", "calibration.cli"),  # also registers `orca board`
     ("train", "pipeline.stages.train"),
+    ("mesh", "pipeline.stages.mesh"),
+    ("export", "pipeline.stages.export"),
     ("render", "pipeline.stages.render"),
     ("evaluate", "pipeline.stages.evaluate"),
 ]

@@ -199,11 +199,70 @@ class TrainConfig(StrictModel):
     losses: LossConfig = Field(default_factory=LossConfig)
 
 
+class MeshConfig(StrictModel):
+    """Marching cubes of the trained SDF (``orca mesh``; see pipeline/stages/mesh.py)."""
+
+    resolution: int = Field(256, ge=16, le=2048, description="voxels along each side of the meshed cube")
+    extent: float | None = Field(
+        None, gt=0, description="half side of the meshed cube (object radii); default: the SDF's own bound"
+    )
+    block_resolution: int = Field(8, ge=2, le=32, description="voxels per side of open3d's voxel blocks")
+    sparse: bool = Field(
+        True, description="evaluate the SDF only in blocks near the surface (found on a coarse pass of one sample "
+        "per block): several times fewer network evaluations at the same mesh"
+    )
+    min_component_fraction: float = Field(
+        0.01, ge=0, le=1,
+        description="drop connected pieces with fewer triangles than this fraction of the largest (floaters)",
+    )
+    colors: bool = Field(True, description="vertex colours from the diffuse head (tone-mapped sRGB)")
+    chunk: int = Field(65536, ge=1024, description="points per network evaluation")
+
+
+class ExportConfig(StrictModel):
+    """Environment views, panoramas, videos, point cloud and object renders (``orca export``)."""
+
+    view_size: int = Field(128, ge=8, description="side of the square environment views (pixels)")
+    view_fov_deg: float = Field(90.0, gt=0, lt=180, description="their field of view")
+    translated_offsets: list[float] = Field(
+        [-0.5, 0.5], description="translated views: sideways shifts from the object centre (object radii)"
+    )
+    rotated_yaw_deg: list[float] = Field(
+        [45.0, 135.0], description="rotated views from the centre: yaws between the cube faces (degrees)"
+    )
+    panorama_width: int = Field(512, ge=8, description="equirectangular panorama width (height: half of it)")
+    point_cloud_max_depth: float = Field(
+        30.0, gt=0, description="panorama points farther than this (object radii) are left out of the point cloud"
+    )
+    video_frames: int = Field(48, ge=2, description="frames per video")
+    video_width: int = Field(160, ge=8, description="video width (pixels, even)")
+    video_height: int = Field(120, ge=8, description="video height (pixels, even)")
+    video_fps: int = Field(12, ge=1)
+    video_fov_deg: float | None = Field(
+        None, gt=0, lt=180, description="orbit video's vertical field of view; default: the training cameras'"
+    )
+    flythrough_radius: float = Field(
+        0.5, ge=0, description="the environment video's camera circles the centre at this radius (object radii)"
+    )
+    object_views: int = Field(8, ge=0, description="object renders from this many evenly spaced training cameras")
+    object_downscale: int = Field(2, ge=1, description="object renders at 1/k of the training size")
+    background: bool = Field(True, description="composite the orbit video's object over the environment field")
+
+    @field_validator("video_width", "video_height")
+    @classmethod
+    def _even(cls, v: int) -> int:
+        if v % 2:
+            raise ValueError(f"video sizes must be even (H.264 with 4:2:0 chroma), got {v}")
+        return v
+
+
 class PipelineConfig(StrictModel):
     preset: str = "standard"
     decode: DecodeConfig = Field(default_factory=DecodeConfig)
     poses: PosesConfig = Field(default_factory=PosesConfig)
     train: TrainConfig = Field(default_factory=TrainConfig)
+    mesh: MeshConfig = Field(default_factory=MeshConfig)
+    export: ExportConfig = Field(default_factory=ExportConfig)
 
 
 PRESETS: dict[str, dict[str, Any]] = {
@@ -217,6 +276,11 @@ PRESETS: dict[str, dict[str, Any]] = {
             "env_grid_log2_table": 17, "n_coarse": 24, "n_fine": 8, "upsample_steps": 2, "band_samples": 16,
             "env_samples": 16, "env_fine": 16,
             "cone_samples": 1,
+        },
+        "mesh": {"resolution": 128},
+        "export": {
+            "view_size": 48, "panorama_width": 128, "video_frames": 16, "video_width": 64, "video_height": 48,
+            "object_views": 4, "object_downscale": 4,
         },
     },
     # A GPU and a real capture.
