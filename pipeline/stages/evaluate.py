@@ -38,15 +38,29 @@ Definitions (every figure is per view; a mean is the mean over views of the per-
   of k x k blocks) and reduces the ground truth over each block: radiance by the mean; masks by the mean
   >= 0.5; interior, finite depth and non-zero normals only where the whole block is (depth then the block's
   mean, normals the normalized block mean).
-- Frames: the model's world frame maps to the ground truth's by a 4x4 similarity ``to_ground_truth``
-  (identity when training used the ground-truth cameras, the only case fitted so far): cameras are moved
-  into the model frame to render, predicted depths scaled and normals rotated back.
+- Frames: the model's world frame maps to the ground truth's by a 4x4 similarity ``to_ground_truth``:
+  cameras are moved into the model frame to render, predicted depths scaled and normals rotated back. The
+  similarity is fitted (Umeyama, :func:`pipeline.alignment.compare_poses`) on the centres of the cameras the
+  model was trained with (``--cameras``, e.g. ``results/<capture>/poses/cameras.json``; default: the cameras
+  the train manifest records) matched by name to the ground truth's. Identity (to rounding) when training used
+  the ground-truth cameras.
+- Poses: after that alignment, per camera the rotation error (deg) and the centre error, in ground-truth
+  units and in % of the orbit radius (the ground-truth cameras' median distance from the object centre).
+  Ground-truth cameras the result lacks (photos SfM did not register) are listed, not counted.
+- Mesh (``--mesh``, e.g. ``results/<capture>/mesh/mesh.ply``): moved into the ground-truth frame and compared
+  with ``ground_truth/object.ply`` by open3d (``TriangleMesh.compute_metrics``, :data:`MESH_SAMPLES` points
+  sampled on each surface, distances to the other surface by ray casting): Chamfer distance (the sum of the
+  two mean distances), Hausdorff distance and F-score at 1/2/5 % of the object radius; distances also as a
+  fraction of the object radius (``scene.json`` object.radius).
 
 Writes ``OUT/`` atomically: ``evaluate.json`` (every figure per view and the means, what was compared,
 timing), ``object_grid.png`` and ``environment_grid.png`` (ground truth beside prediction), the predicted
 images at the rendered size in decoded units and the ground-truth frame (``<view>_rgb|diffuse|specular|normal|
 depth.exr``, the normal as rendered: opacity-weighted, not normalized; ``<view>_mask.png``, opacity > 0.5;
 ``env_<view>_rgb|depth.exr``) and ``manifest.json``.
+
+``orca evaluate RESULTS`` also takes a capture's results folder (``results/<capture>/``): its ``train/``,
+``poses/cameras.json`` and ``mesh/mesh.ply`` are then used where they exist.
 """
 
 from __future__ import annotations
@@ -78,6 +92,8 @@ SSIM_WINDOW = 11
 PROP_MARGIN = 0.05
 FALLBACK_ERODE_PX = 2
 GRID_OBJECT_VIEWS = 4
+MESH_SAMPLES = 100_000
+FSCORE_RADII = (0.01, 0.02, 0.05)  # object radii
 
 OBJECT_METRICS = (
     "normal_mae_deg", "mask_iou",
@@ -340,6 +356,56 @@ class Alignment:
     def normals_to_ground_truth(self, normals: np.ndarray) -> np.ndarray:
         return normals @ self.rotation.T
 
+    def points_to_ground_truth(self, points: np.ndarray) -> np.ndarray:
+        """``(..., 3)`` model-frame points -> ground-truth frame."""
+        return self.scale * np.asarray(points) @ self.rotation.T + self.matrix[:3, 3]
+
+
+def align_cameras(result: CameraSet, truth: CameraSet, centre: np.ndarray | None = None,
+                  result_path: Path | None = None) -> tuple[Alignment, dict[str, Any]]:
+    """The similarity result frame -> ground-truth frame fitted on the centres of the cameras both hold
+    (matched by name), and the pose errors left after it (see the module doc).
+
+    Args:
+        centre: the object centre in the ground-truth frame (the orbit radius is measured from it);
+            default: the mean of the ground-truth camera centres.
+    Returns:
+        the alignment and a JSON-ready report: ``summary`` (medians, means, maxima; centre errors also in %
+        of the orbit radius), ``per_camera``, ``missing`` (ground-truth cameras the result lacks).
+    """
+    from ..alignment import compare_poses
+
+    ours, theirs = result.by_name(), truth.by_name()
+    common = [n for n in theirs if n in ours]
+    missing = [n for n in theirs if n not in ours]
+    if len(common) < 3:
+        raise InputError(f"only {len(common)} camera name(s) in common with the ground truth; aligning the frames "
+                         "needs 3 or more", result_path,
+                         "pass the cameras.json the model was trained with (the poses stage's), whose names are the "
+                         "photos' names")
+    est = np.stack([ours[n].c2w for n in common])
+    ref = np.stack([theirs[n].c2w for n in common])
+    try:
+        errors = compare_poses(est, ref)
+    except ValueError as e:
+        raise InputError(f"cannot align the cameras to the ground truth: {e}", result_path) from e
+    centres = np.stack([c.center for c in truth.cameras])
+    centre = centres.mean(0) if centre is None else np.asarray(centre, np.float64)
+    orbit = float(np.median(np.linalg.norm(centres - centre, axis=1)))
+    summary = errors.summary(scale=orbit)
+    summary = {k: v for k, v in summary.items() if not k.endswith("_fraction")}
+    summary.update(center_median_percent=100 * float(np.median(errors.center)) / orbit,
+                   center_max_percent=100 * float(errors.center.max()) / orbit, orbit_radius=orbit,
+                   cameras=len(common), missing=len(missing), scale=errors.similarity.scale)
+    report = {
+        "summary": summary,
+        "per_camera": {n: {"rotation_deg": float(r), "center": float(c), "center_percent": 100 * float(c) / orbit}
+                       for n, r, c in zip(common, errors.rotation_deg, errors.center, strict=True)},
+        "missing": missing, "to_ground_truth": errors.similarity.matrix.tolist(),
+        "method": "Umeyama similarity on camera centres (result -> ground truth), then per-camera errors",
+    }
+    return Alignment.from_matrix(errors.similarity.matrix), report
+
 
 # ------------------------------------------------------------------------------------------ ground truth
 
@@ -379,6 +445,25 @@ class GroundTruth:
             return [Prop.from_json(p) for p in self.scene.get("props", [])]
         except (KeyError, TypeError, ValueError) as e:
             raise InputError(f"bad props entry: {e}", self.folder / "scene.json") from e
+
+    @property
+    def object_centre(self) -> np.ndarray | None:
+        centre = self.scene.get("object", {}).get("centre") if self.scene_path.is_file() else None
+        return np.asarray(centre, np.float64) if centre is not None else None
+
+    @property
+    def object_radius(self) -> float:
+        radius = self.scene.get("object", {}).get("radius") if self.scene_path.is_file() else None
+        return float(radius) if radius is not None else 1.0
+
+    @property
+    def scene_path(self) -> Path:
+        return self.folder / "scene.json"
+
+    def object_mesh(self) -> Path:
+        name = self.scene.get("object", {}).get("mesh", "object.ply") if self.scene_path.is_file() else "object.ply"
+        return self.path(name, fix="the ground truth has no object mesh: drop --mesh, or regenerate the capture "
+                                   "with `orca synth`")
 
     @property
     def optics_blur_px(self) -> float:
@@ -647,6 +732,48 @@ def evaluate_environment(model, gt_dir: Path, views: int | Sequence[str] | None 
             "mean": _means(per_view, ENVIRONMENT_METRICS), "seconds_per_view": seconds / max(len(names), 1)}
 
 
+# ------------------------------------------------------------------------------------------------- mesh
+
+
+def evaluate_mesh(mesh_path: Path, gt: GroundTruth, align: Alignment | None = None,
+                  samples: int = MESH_SAMPLES) -> dict[str, Any]:
+    """A result mesh (model frame) against the ground truth's object mesh, in the ground-truth frame (see the
+    module doc). Distances in ground-truth units and, ``*_fraction``, in object radii."""
+    import open3d as o3d
+
+    align = align or Alignment.identity()
+    mesh_path = Path(mesh_path)
+    if not mesh_path.is_file():
+        raise InputError("mesh not found", mesh_path, "run `orca mesh` first, or drop --mesh")
+    ours = o3d.io.read_triangle_mesh(str(mesh_path))
+    if len(ours.triangles) == 0:
+        raise InputError("the mesh has no triangles", mesh_path, "check mesh_report.json beside it")
+    theirs_path = gt.object_mesh()
+    theirs = o3d.io.read_triangle_mesh(str(theirs_path))
+    if len(theirs.triangles) == 0:
+        raise InputError("the ground-truth mesh has no triangles", theirs_path)
+    ours.transform(align.matrix)
+    radius = gt.object_radius
+    o3d.utility.random.seed(0)  # the surface samples: the same figures on every run
+    params = o3d.t.geometry.MetricParameters(fscore_radius=[f * radius for f in FSCORE_RADII],
+                                             n_sampled_points=samples)
+    metrics = o3d.t.geometry.Metric
+    values = o3d.t.geometry.TriangleMesh.from_legacy(ours).compute_metrics(
+        o3d.t.geometry.TriangleMesh.from_legacy(theirs),
+        [metrics.ChamferDistance, metrics.HausdorffDistance, metrics.FScore], params).numpy().astype(float)
+    chamfer, hausdorff, fscores = float(values[0]), float(values[1]), values[2:]
+    return {
+        "mesh": str(mesh_path), "ground_truth_mesh": str(theirs_path), "object_radius": radius,
+        "chamfer": chamfer, "chamfer_fraction": chamfer / radius,
+        "hausdorff": hausdorff, "hausdorff_fraction": hausdorff / radius,
+        **{f"fscore_{round(100 * f)}pct": float(v) / 100 for f, v in zip(FSCORE_RADII, fscores, strict=True)},
+        "samples": samples, "vertices": len(ours.vertices), "triangles": len(ours.triangles),
+        "definition": "open3d compute_metrics: Chamfer = mean distance of sampled points of each mesh to the "
+                      "other mesh, summed over both directions; F-score in [0, 1] at the given fraction of the "
+                      "object radius",
+    }
+
+
 # ---------------------------------------------------------------------------------------------- pictures
 
 
@@ -775,6 +902,37 @@ def print_table(results: dict[str, Any]) -> None:
             text = "—" if value is None or not math.isfinite(value) else f"{value:.4g}"
             table.add_row(label, text, unit, better)
         console.print(table)
+    poses = results.get("poses")
+    if poses:
+        s = poses["summary"]
+        table = Table(title=f"poses: {s['cameras']} cameras aligned by a similarity on their centres"
+                            + (f" ({s['missing']} missing)" if s["missing"] else ""))
+        for column in ("metric", "median", "max", "unit"):
+            table.add_column(column, justify="left" if column in ("metric", "unit") else "right")
+        table.add_row("rotation error", f"{s['rotation_deg_median']:.3g}", f"{s['rotation_deg_max']:.3g}", "deg")
+        table.add_row("centre error", f"{s['center_median_percent']:.3g}", f"{s['center_max_percent']:.3g}",
+                      "% of orbit radius")
+        console.print(table)
+    mesh = results.get("mesh")
+    if mesh:
+        table = Table(title=f"mesh vs ground truth ({mesh['samples']} samples per surface)")
+        for column in ("metric", "value", "unit"):
+            table.add_column(column, justify="right" if column == "value" else "left")
+        table.add_row("Chamfer", f"{mesh['chamfer_fraction']:.4g}", "object radii (lower is better)")
+        table.add_row("Hausdorff", f"{mesh['hausdorff_fraction']:.4g}", "object radii")
+        for f in FSCORE_RADII:
+            key = f"fscore_{round(100 * f)}pct"
+            table.add_row(f"F-score at {100 * f:g} %", f"{mesh[key]:.4g}", "(higher is better)")
+        console.print(table)
+
+
+def _recorded_cameras(train_dir: Path) -> Path | None:
+    """The cameras.json the train manifest records, if it is reachable from here."""
+    try:
+        path = Path(read_json(train_dir / "manifest.json")["inputs"]["cameras"]["path"])
+    except (OSError, KeyError, TypeError, ValueError):
+        return None
+    return path if path.is_file() else None
 
 
 def _trained_on(train_dir: Path, cameras_path: Path) -> bool | None:
@@ -796,6 +954,8 @@ def run_evaluate(
     object: bool = True,  # the name of the CLI's --no-object (shadows the builtin here only)
     environment: bool = True,
     to_ground_truth: np.ndarray | None = None,
+    cameras: Path | None = None,
+    mesh: Path | None = None,
     device: str = "auto",
 ) -> dict[str, Any]:
     """Evaluate a train folder against a ground-truth folder and write ``out_dir`` atomically.
@@ -803,11 +963,16 @@ def run_evaluate(
     Args:
         views: object views: None (all), N evenly spaced, or names. Environment views: always all.
         downscale: render (and compare) k times smaller, for both object and environment views.
-        to_ground_truth: 4x4 similarity model frame -> ground-truth frame (default identity).
+        to_ground_truth: 4x4 similarity model frame -> ground-truth frame; default: fitted on the centres of
+            ``cameras`` (below), else identity.
+        cameras: the cameras.json the model was trained with (its frame is the model's); default: the one the
+            train manifest records. Gives the alignment and the pose errors.
+        mesh: a mesh of the model (``orca mesh``'s mesh.ply, model frame) to compare with ``object.ply``.
     Returns:
         The content of ``evaluate.json`` (NaN written as null).
     """
-    from .train import FINAL_WEIGHTS, load_model, resolve_device
+    from .render import load_renderer
+    from .train import FINAL_WEIGHTS
 
     started = time.time()
     train_dir, out_dir = Path(train_dir), Path(out_dir)
@@ -821,16 +986,30 @@ def run_evaluate(
     if environment and not gt.has_environment:
         raise InputError("the ground truth has no environment views", gt.folder / "environment" / "cameras.json",
                          "pass --no-environment, or regenerate the capture with `orca synth`")
-    align = Alignment.from_matrix(to_ground_truth)
+    if mesh is not None and not Path(mesh).is_file():
+        raise InputError("mesh not found", mesh, "run `orca mesh` first, or drop --mesh")
     trained_on_gt = _trained_on(train_dir, gt.folder / "cameras.json")
-    if trained_on_gt is False and to_ground_truth is None:
-        log.warning("the model was trained with other cameras than %s; without an alignment its frame may differ "
-                    "from the ground truth's and the figures will be meaningless", gt.folder / "cameras.json")
-    model = load_model(train_dir, str(resolve_device(device)))
+    cameras = Path(cameras) if cameras is not None else _recorded_cameras(train_dir)
+    poses: dict[str, Any] | None = None
+    if cameras is not None:
+        fitted, poses = align_cameras(load_cameras(cameras), gt.cameras, gt.object_centre, cameras)
+        poses["cameras"] = str(cameras)
+        log.info("poses: %d cameras of %s aligned to the ground truth: rotation error median %.3g deg, centre "
+                 "error median %.3g %% of the orbit radius", poses["summary"]["cameras"], cameras,
+                 poses["summary"]["rotation_deg_median"], poses["summary"]["center_median_percent"])
+    align = Alignment.from_matrix(to_ground_truth if to_ground_truth is not None or cameras is None else
+                                  fitted.matrix)
+    if trained_on_gt is False and to_ground_truth is None and cameras is None:
+        log.warning("the model was trained with other cameras than %s; without them (--cameras) its frame may "
+                    "differ from the ground truth's and the figures will be meaningless", gt.folder / "cameras.json")
+    model = load_renderer(train_dir, device)
     log.info("evaluate: %s against %s (downscale %d)", train_dir, gt.folder, downscale)
     results: dict[str, Any] = {
         "train": str(train_dir), "ground_truth": str(gt.folder), "downscale": downscale,
-        "to_ground_truth": align.matrix.tolist(), "trained_with_ground_truth_cameras": trained_on_gt,
+        "to_ground_truth": align.matrix.tolist(),
+        "alignment": "given" if to_ground_truth is not None else (
+            "fitted on camera centres" if cameras is not None else "identity (no cameras to fit on)"),
+        "trained_with_ground_truth_cameras": trained_on_gt,
         "radiance_to_decoded": gt.factor,
         "definitions": {
             "psnr_peak": f"{PSNR_PEAK:g} decoded unit (the white level of the reference exposure) for every view "
@@ -845,7 +1024,11 @@ def run_evaluate(
             "means": "mean over views of the per-view figures, ignoring views where a figure is undefined",
         },
     }
+    if poses is not None:
+        results["poses"] = poses
     with atomic_dir(out_dir) as tmp:
+        if mesh is not None:
+            results["mesh"] = evaluate_mesh(Path(mesh), gt, align)
         if object:
             results["object"] = evaluate_object(model, gt.folder, views, downscale, to_ground_truth=align.matrix,
                                                 save_dir=tmp)
@@ -857,6 +1040,10 @@ def run_evaluate(
         results = _json_safe(results)
         write_json(tmp / EVALUATE_JSON, results)
         inputs = {"model": weights, "cameras": gt.folder / "cameras.json", "scene": gt.folder / "scene.json"}
+        if cameras is not None:
+            inputs["result_cameras"] = cameras
+        if mesh is not None:
+            inputs["mesh"] = Path(mesh)
         write_manifest(tmp, stage="evaluate", inputs=inputs, started=started,
                        config={"views": results.get("object", {}).get("views"), "downscale": downscale,
                                "object": object, "environment": environment})
@@ -888,8 +1075,16 @@ def register(subparsers: Any) -> None:
         "PSNR/SSIM on object views; RGB and depth of environment views (all pixels and prop pixels).",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("train_dir", type=Path, help="train stage folder (holds model.pt)")
+    p.add_argument("train_dir", type=Path, metavar="RESULTS",
+                   help="train stage folder (holds model.pt), or a capture's results folder holding train/")
     p.add_argument("--ground-truth", type=Path, required=True, help="a synthetic capture's ground_truth/ folder")
+    p.add_argument("--cameras", type=Path, default=None,
+                   help="the cameras.json the model was trained with (e.g. results/<capture>/poses/cameras.json): "
+                        "aligns its frame to the ground truth's and reports pose errors (default: RESULTS/poses/"
+                        "cameras.json, else the cameras the train manifest records)")
+    p.add_argument("--mesh", type=Path, default=None,
+                   help="the model's mesh.ply (orca mesh) to compare with ground_truth/object.ply (default: "
+                        "RESULTS/mesh/mesh.ply when RESULTS is a results folder)")
     p.add_argument("--out", type=Path, default=None, help="output folder (default: evaluate/ beside TRAIN_DIR)")
     p.add_argument("--views", type=int, default=None, metavar="N",
                    help="evaluate N evenly spaced object views (default: every view)")
@@ -900,8 +1095,19 @@ def register(subparsers: Any) -> None:
     p.set_defaults(func=main)
 
 
+def resolve_results(path: Path) -> tuple[Path, Path | None, Path | None]:
+    """``(train_dir, cameras, mesh)`` of a train folder (no cameras or mesh implied), or of a capture's results
+    folder (``train/``, ``poses/cameras.json`` and ``mesh/mesh.ply`` where they exist)."""
+    path = Path(path)
+    if (path / "model.pt").is_file() or not (path / "train" / "model.pt").is_file():
+        return path, None, None
+    found = lambda p: p if p.is_file() else None
+    return path / "train", found(path / "poses" / "cameras.json"), found(path / "mesh" / "mesh.ply")
+
+
 def main(args: argparse.Namespace) -> dict[str, Any]:
-    train_dir = Path(args.train_dir)
+    train_dir, cameras, mesh = resolve_results(args.train_dir)
     out = args.out if args.out is not None else train_dir.parent / "evaluate"
     return run_evaluate(train_dir, args.ground_truth, out, views=args.views, downscale=args.downscale,
-                        object=not args.no_object, environment=not args.no_environment, device=args.device)
+                        object=not args.no_object, environment=not args.no_environment,
+                        cameras=args.cameras or cameras, mesh=args.mesh or mesh, device=args.device)

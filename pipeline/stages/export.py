@@ -283,26 +283,28 @@ def overview(path: Path, panorama: dict[str, np.ndarray], env_views: dict[str, d
 
     cube = [n for n in env_views if n.startswith("cube_")]
     columns = max(len(cube), 4)
-    rows = 4 + (1 if objects else 0)
-    fig = Figure(figsize=(columns * 1.8, rows * 1.9), dpi=110, layout="constrained")
-    grid = fig.add_gridspec(rows, columns)
-    pano = [("panorama (environment field, from the centre)", linear_to_srgb(panorama["rgb"])),
-            ("panorama depth (object radii)", panorama["depth"])]
-    for r, (title, image) in enumerate(pano):
-        ax = fig.add_subplot(grid[r, :])
-        if image.ndim == 2:
-            im = ax.imshow(np.where(np.isfinite(image), image, np.nan), cmap="turbo", vmin=scale[0], vmax=scale[1])
-            fig.colorbar(im, ax=ax, fraction=0.02, pad=0.01)
-        else:
-            ax.imshow(image)
-        ax.set_title(title, fontsize=8)
-        ax.set_axis_off()
+    columns += columns % 2
+    rows = 3 + (1 if objects else 0)
+    tile = 1.8
+    fig = Figure(figsize=(columns * tile, (rows + 0.6) * tile), dpi=110, layout="constrained")
+    grid = fig.add_gridspec(rows, columns, height_ratios=[1.6] + [1] * (rows - 1))
+    half = columns // 2
+    ax = fig.add_subplot(grid[0, :half])
+    ax.imshow(linear_to_srgb(panorama["rgb"]), interpolation="nearest")
+    ax.set_title("panorama from the centre (environment field)", fontsize=8)
+    ax.set_axis_off()
+    ax = fig.add_subplot(grid[0, half:])
+    im = ax.imshow(np.where(np.isfinite(panorama["depth"]), panorama["depth"], np.nan), cmap="turbo",
+                   vmin=scale[0], vmax=scale[1], interpolation="nearest")
+    fig.colorbar(im, ax=ax, fraction=0.03, pad=0.01, label="depth (object radii)")
+    ax.set_title("panorama depth", fontsize=8)
+    ax.set_axis_off()
     for c, name in enumerate(cube):
         for r, (image, kw) in enumerate(((linear_to_srgb(env_views[name]["rgb"]), {}),
                                          (env_views[name]["depth"], {"cmap": "turbo", "vmin": scale[0],
                                                                      "vmax": scale[1]}))):
-            ax = fig.add_subplot(grid[2 + r, c])
-            ax.imshow(image, **kw)
+            ax = fig.add_subplot(grid[1 + r, c])
+            ax.imshow(image, interpolation="nearest", **kw)
             ax.set_axis_off()
             if r == 0:
                 ax.set_title(name, fontsize=8)
@@ -311,8 +313,8 @@ def overview(path: Path, panorama: dict[str, np.ndarray], env_views: dict[str, d
         parts = [("combined", linear_to_srgb(view["rgb"])), ("diffuse", linear_to_srgb(view["diffuse"])),
                  ("specular", linear_to_srgb(view["specular"])), ("normals", normal_png(view["normal"]))]
         for c, (title, image) in enumerate(parts):
-            ax = fig.add_subplot(grid[4, c])
-            ax.imshow(image)
+            ax = fig.add_subplot(grid[3, c])
+            ax.imshow(image, interpolation="nearest")
             ax.set_title(f"{name}: {title}", fontsize=8)
             ax.set_axis_off()
     fig.savefig(path)

@@ -1,0 +1,222 @@
+"""``orca evaluate`` against a ground truth made from the model's own renders: perfect scores when a result is
+compared with itself (also through a frame change that the camera alignment undoes), and the right worse
+scores for known perturbations (rotated frame without alignment, noisy normals, a diffuse offset, rotated
+cameras, a scaled mesh). The alignment recovers a known similarity from camera centres."""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from tiny_model import orbit_cameras, write_untrained_train_dir
+
+from pipeline.alignment import Similarity
+from pipeline.cameras import CameraSet, save_cameras
+from pipeline.errors import InputError
+from pipeline.imageio import read_exr, read_image, write_exr, write_png
+from pipeline.stages.evaluate import PSNR_CAP_DB, align_cameras, run_evaluate
+
+
+def _rotation(axis, deg: float) -> np.ndarray:
+    axis = np.asarray(axis, np.float64) / np.linalg.norm(axis)
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    a = np.deg2rad(deg)
+    return np.eye(3) + np.sin(a) * k + (1 - np.cos(a)) * k @ k
+
+
+SIM = Similarity(1.7, _rotation([1, 2, 3], 40.0), np.array([0.5, -1.0, 2.0]))  # model frame -> "ground truth"
+
+
+def _moved(cams: CameraSet, sim: Similarity) -> CameraSet:
+    return CameraSet(cameras=[c.model_copy(update={"camera_to_world": sim.apply_c2w(c.c2w).tolist()})
+                              for c in cams.cameras])
+
+
+def ground_truth_from_model(train: Path, mesh: Path, out: Path, sim: Similarity | None = None) -> tuple[Path, Path]:
+    """A ``ground_truth/`` folder whose images are the model's own renders (``orca render``), its world frame
+    the model's moved by ``sim``; and the model-frame cameras.json (the "result's" cameras)."""
+    import open3d as o3d
+
+    from pipeline.config import ExportConfig
+    from pipeline.stages.export import environment_cameras, panorama_frame
+    from pipeline.stages.render import run_render
+
+    sim = sim or Similarity(1.0, np.eye(3), np.zeros(3))
+    work = out.parent / f"{out.name}_renders"
+    cams = orbit_cameras(3, width=48, height=36, prefix="IMG_")
+    env = CameraSet(cameras=environment_cameras(ExportConfig(view_size=12, translated_offsets=[0.4],
+                                                             rotated_yaw_deg=[]), panorama_frame([0, 0, 1])))
+    model_cams = save_cameras(work / "cameras.json", cams)
+    save_cameras(work / "env_cameras.json", env)
+    run_render(train, model_cams, work / "object", device="cpu")
+    run_render(train, work / "env_cameras.json", work / "env", environment=True, device="cpu")
+    r, s = sim.rotation, sim.scale
+    for cam in cams.cameras:
+        n = cam.name
+        for part, folder in (("rgb", "linear"), ("diffuse", "diffuse"), ("specular", "specular")):
+            write_exr(out / folder / f"{n}.exr", read_exr(work / "object" / f"{n}_{part}.exr"))
+        write_exr(out / "normals" / f"{n}.exr", read_exr(work / "object" / f"{n}_normal.exr") @ r.T.astype(np.float32))
+        write_exr(out / "depth" / f"{n}.exr", read_exr(work / "object" / f"{n}_depth.exr") * np.float32(s))
+        write_png(out / "masks" / f"{n}.png", read_image(work / "object" / f"{n}_mask.png"))
+    for cam in env.cameras:
+        write_exr(out / "environment" / "rgb" / f"{cam.name}.exr", read_exr(work / "env" / f"{cam.name}_rgb.exr"))
+        write_exr(out / "environment" / "depth" / f"{cam.name}.exr",
+                  read_exr(work / "env" / f"{cam.name}_depth.exr") * np.float32(s))
+    save_cameras(out / "cameras.json", _moved(cams, sim))
+    save_cameras(out / "environment" / "cameras.json", _moved(env, sim))
+    (out / "scene.json").write_text(json.dumps({
+        "radiance_to_decoded": {"factor": 1.0},
+        "object": {"centre": sim.translation.tolist(), "radius": 0.7 * s, "mesh": "object.ply"}, "props": []}))
+    gt_mesh = o3d.io.read_triangle_mesh(str(mesh))
+    gt_mesh.transform(sim.matrix)
+    o3d.io.write_triangle_mesh(str(out / "object.ply"), gt_mesh)
+    return out, model_cams
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """(train folder, its mesh.ply): an untrained tiny model, meshed at 48^3."""
+    from pipeline.config import MeshConfig
+    from pipeline.stages.mesh import run_mesh
+
+    root = tmp_path_factory.mktemp("self")
+    train = write_untrained_train_dir(root / "train")
+    run_mesh(train, root / "mesh", MeshConfig(resolution=48), device="cpu")
+    return train, root / "mesh" / "mesh.ply"
+
+
+def _evaluate(train, gt, out, **kw):
+    return run_evaluate(train, gt, out, device="cpu", **kw)
+
+
+def _assert_perfect(res):
+    obj, env = res["object"]["mean"], res["environment"]["mean"]
+    assert obj["normal_mae_deg"] < 0.05 and obj["mask_iou"] == 1.0
+    for part in ("rgb", "diffuse", "specular"):
+        assert obj[f"psnr_{part}"] > 80 and obj[f"ssim_{part}"] > 0.9999, part
+    assert obj["depth_absrel"] < 1e-5
+    assert env["psnr_all"] > 80 and env["ssim_all"] > 0.9999 and env["depth_absrel"] < 1e-5
+    assert res["mesh"]["chamfer_fraction"] < 1e-4 and res["mesh"]["fscore_1pct"] == pytest.approx(1.0)
+
+
+def test_a_result_compared_with_itself_scores_perfectly(tiny, tmp_path):
+    train, mesh = tiny
+    gt, cams = ground_truth_from_model(train, mesh, tmp_path / "gt")
+    res = _evaluate(train, gt, tmp_path / "ev", cameras=cams, mesh=mesh)
+    _assert_perfect(res)
+    assert res["object"]["mean"]["psnr_rgb"] == pytest.approx(PSNR_CAP_DB)
+    s = res["poses"]["summary"]
+    assert s["rotation_deg_max"] < 1e-6 and s["center_max_percent"] < 1e-6 and s["missing"] == 0
+    saved = json.loads((tmp_path / "ev" / "evaluate.json").read_text())
+    assert saved["poses"]["summary"] == s and saved["mesh"]["chamfer"] == res["mesh"]["chamfer"]
+
+
+def test_a_moved_frame_is_undone_by_the_camera_alignment_and_costs_dearly_without_it(tiny, tmp_path):
+    train, mesh = tiny
+    gt, cams = ground_truth_from_model(train, mesh, tmp_path / "gt", SIM)
+    res = _evaluate(train, gt, tmp_path / "ev", cameras=cams, mesh=mesh)
+    np.testing.assert_allclose(res["to_ground_truth"], SIM.matrix, atol=1e-9)
+    _assert_perfect(res)
+    assert res["poses"]["summary"]["scale"] == pytest.approx(1.7)
+
+    unaligned = _evaluate(train, gt, tmp_path / "ev2", mesh=mesh, to_ground_truth=np.eye(4))
+    obj = unaligned["object"]["mean"]
+    assert obj["normal_mae_deg"] > 20 and obj["mask_iou"] < 0.5, obj
+    assert unaligned["mesh"]["chamfer_fraction"] > 1.0
+
+
+def test_noisy_normals_and_a_diffuse_offset_give_the_expected_errors(tiny, tmp_path):
+    train, mesh = tiny
+    gt, cams = ground_truth_from_model(train, mesh, tmp_path / "gt")
+    rng = np.random.default_rng(0)
+    tilt, offset = 5.0, 0.01
+    for path in sorted((gt / "normals").glob("*.exr")):
+        n = read_exr(path).astype(np.float64)
+        valid = np.linalg.norm(n, axis=-1) > 1e-6
+        # each normal turned by exactly `tilt` degrees about a random axis perpendicular to it
+        perp = np.cross(n, rng.normal(size=n.shape))
+        perp /= np.maximum(np.linalg.norm(perp, axis=-1, keepdims=True), 1e-12)
+        turned = np.cos(np.deg2rad(tilt)) * n + np.sin(np.deg2rad(tilt)) * perp
+        write_exr(path, np.where(valid[..., None], turned, 0).astype(np.float32))
+    for path in sorted((gt / "diffuse").glob("*.exr")):
+        write_exr(path, read_exr(path) + np.float32(offset))
+    res = _evaluate(train, gt, tmp_path / "ev", cameras=cams, environment=False)
+    obj = res["object"]["mean"]
+    assert obj["normal_mae_deg"] == pytest.approx(tilt, abs=0.02)
+    assert obj["psnr_diffuse"] == pytest.approx(-20 * math.log10(offset), abs=0.05)  # MSE = offset^2: 40 dB
+    assert obj["ssim_diffuse"] < 0.9999
+    assert obj["psnr_specular"] > 80 and obj["mask_iou"] == 1.0, "the rest is untouched"
+
+
+def test_rotated_cameras_show_as_pose_errors_and_a_scaled_mesh_as_chamfer(tiny, tmp_path):
+    import open3d as o3d
+
+    train, mesh = tiny
+    gt, cams = ground_truth_from_model(train, mesh, tmp_path / "gt")
+    # the result's cameras: each turned 2 degrees about its own optical axis (centres unchanged)
+    from pipeline.cameras import load_cameras
+
+    result = load_cameras(cams)
+    turned = []
+    for c in result.cameras:
+        c2w = c.c2w.copy()
+        c2w[:3, :3] = c2w[:3, :3] @ _rotation([0, 0, 1], 2.0)
+        turned.append(c.model_copy(update={"camera_to_world": c2w.tolist()}))
+    cams2 = save_cameras(tmp_path / "turned.json", CameraSet(cameras=turned))
+    bigger = o3d.io.read_triangle_mesh(str(mesh))
+    bigger.scale(1.1, center=np.zeros(3))
+    mesh2 = tmp_path / "bigger.ply"
+    o3d.io.write_triangle_mesh(str(mesh2), bigger)
+    res = _evaluate(train, gt, tmp_path / "ev", cameras=cams2, mesh=mesh2, environment=False, views=1)
+    s = res["poses"]["summary"]
+    assert s["rotation_deg_median"] == pytest.approx(2.0, abs=1e-6) and s["center_max_percent"] < 1e-6
+    # a sphere of radius 0.77 against 0.7: 0.07 each way, Chamfer (sum of both means) 0.14 = 0.2 radii
+    assert res["mesh"]["chamfer_fraction"] == pytest.approx(0.2, rel=0.02)
+    assert res["mesh"]["fscore_5pct"] < 0.05 and res["mesh"]["fscore_1pct"] == pytest.approx(0.0, abs=1e-3)
+
+
+def test_alignment_recovers_a_known_similarity_and_names_missing_cameras():
+    truth = orbit_cameras(8, prefix="IMG_")  # in the model's frame; the ground truth's is SIM of it
+    result = CameraSet(cameras=truth.cameras[:6])  # SfM lost two photos
+    align, report = align_cameras(result, _moved(truth, SIM), centre=SIM.translation)
+    np.testing.assert_allclose(align.matrix, SIM.matrix, atol=1e-9)
+    assert align.scale == pytest.approx(1.7)
+    assert report["missing"] == ["IMG_6", "IMG_7"] and report["summary"]["cameras"] == 6
+    assert report["summary"]["orbit_radius"] == pytest.approx(3.0 * 1.7)
+    assert report["summary"]["rotation_deg_max"] < 1e-6
+    # noisy centres: the errors are reported, in % of the orbit radius
+    rng = np.random.default_rng(1)
+    noisy = []
+    for c in truth.cameras:
+        c2w = c.c2w.copy()
+        c2w[:3, 3] += rng.normal(0, 0.03, 3)
+        noisy.append(c.model_copy(update={"camera_to_world": c2w.tolist()}))
+    noisy = CameraSet(cameras=noisy)
+    _, report = align_cameras(noisy, truth, centre=np.zeros(3))
+    assert 0.2 < report["summary"]["center_median_percent"] < 3.0  # ~ 0.03 x sqrt(3) / 3 = 1.7 %
+    with pytest.raises(InputError, match="in common"):
+        align_cameras(orbit_cameras(3, prefix="other"), truth)
+
+
+def test_orca_evaluate_on_a_results_folder(tiny, tmp_path):
+    from pipeline.cli import main
+
+    train, mesh = tiny
+    gt, cams = ground_truth_from_model(train, mesh, tmp_path / "gt")
+    results = tmp_path / "results"
+    shutil.copytree(train, results / "train")
+    (results / "poses").mkdir(parents=True)
+    shutil.copy(cams, results / "poses" / "cameras.json")
+    (results / "mesh").mkdir()
+    shutil.copy(mesh, results / "mesh" / "mesh.ply")
+    assert main(["evaluate", str(results), "--ground-truth", str(gt), "--views", "1", "--no-environment",
+                 "--device", "cpu"]) == 0
+    saved = json.loads((results / "evaluate" / "evaluate.json").read_text())
+    assert saved["alignment"] == "fitted on camera centres" and "mesh" in saved and "poses" in saved
+    assert main(["evaluate", str(results), "--ground-truth", str(gt), "--mesh", str(tmp_path / "none.ply"),
+                 "--out", str(tmp_path / "x")]) == 2
+    assert not (tmp_path / "x").exists()
