@@ -74,6 +74,8 @@ def has_ground_truth(capture):
 rule all:
     input:
         expand(RESULTS_DIR / "{capture}" / "train", capture=CAPTURES),
+        expand(RESULTS_DIR / "{capture}" / "mesh", capture=CAPTURES),
+        expand(RESULTS_DIR / "{capture}" / "export", capture=CAPTURES),
         [RESULTS_DIR / c / "evaluate" for c in CAPTURES if has_ground_truth(c)],
 
 
@@ -107,16 +109,49 @@ rule train:
         "--capture {CAPTURES_DIR}/{wildcards.capture} --out {output} --preset {PRESET} {SET} > {log} 2>&1"
 
 
-rule evaluate:
-    """A synthetic capture's trained model against its ground truth: normals, diffuse / specular / combined,
-    environment views and their depth (8 object views at half size keep it minutes on a CPU)."""
+rule mesh:
+    """The trained SDF -> mesh.ply (open3d marching cubes, diffuse-head vertex colours; mesh_colmap.ply when the
+    cameras record to_colmap), mesh_report.json, mesh.png."""
     input:
         train=RESULTS_DIR / "{capture}" / "train",
+        cameras=lambda wc: cameras_and_masks(wc)["cameras"],
+    output:
+        directory(RESULTS_DIR / "{capture}" / "mesh"),
+    log:
+        RESULTS_DIR / "{capture}" / "logs" / "mesh.log",
+    shell:
+        "{ORCA} mesh {input.train} --cameras {input.cameras} --out {output} --preset {PRESET} {SET} > {log} 2>&1"
+
+
+rule export:
+    """The trained model -> environment views + depth (EXR + PNG) from virtual cameras at the object, an
+    equirectangular panorama + depth, the environment as a point cloud, orbit and flythrough videos (MP4),
+    object renders (combined, diffuse, specular, normals). Rendering uses every core."""
+    input:
+        train=RESULTS_DIR / "{capture}" / "train",
+        cameras=lambda wc: cameras_and_masks(wc)["cameras"],
+    output:
+        directory(RESULTS_DIR / "{capture}" / "export"),
+    log:
+        RESULTS_DIR / "{capture}" / "logs" / "export.log",
+    threads: workflow.cores
+    shell:
+        "{ORCA} export {input.train} --cameras {input.cameras} --out {output} --preset {PRESET} {SET} > {log} 2>&1"
+
+
+rule evaluate:
+    """A synthetic capture's trained model against its ground truth: camera alignment and pose errors, the
+    mesh's Chamfer distance, normals, diffuse / specular / combined, environment views and their depth (8
+    object views at half size keep it minutes on a CPU)."""
+    input:
+        train=RESULTS_DIR / "{capture}" / "train",
+        cameras=lambda wc: cameras_and_masks(wc)["cameras"],
+        mesh=RESULTS_DIR / "{capture}" / "mesh",
         ground_truth=CAPTURES_DIR / "{capture}" / "ground_truth",
     output:
         directory(RESULTS_DIR / "{capture}" / "evaluate"),
     log:
         RESULTS_DIR / "{capture}" / "logs" / "evaluate.log",
     shell:
-        "{ORCA} evaluate {input.train} --ground-truth {input.ground_truth} --out {output} --views 8 "
-        "--downscale 2 > {log} 2>&1"
+        "{ORCA} evaluate {input.train} --ground-truth {input.ground_truth} --cameras {input.cameras} "
+        "--mesh {input.mesh}/mesh.ply --out {output} --views 8 --downscale 2 > {log} 2>&1"

@@ -3,6 +3,7 @@ nothing, and a capture without cameras and masks is refused with a clear message
 
 from __future__ import annotations
 
+import json
 import shutil
 import subprocess
 import sys
@@ -16,6 +17,9 @@ TINY_TRAIN = [
     "train.upsample_steps=1", "train.band_samples=4", "train.env_samples=6", "train.grid_levels=4",
     "train.grid_log2_table=10", "train.texture_levels=2", "train.texture_log2_table=10",
     "train.env_grid_log2_table=10", "train.sdf_hidden=16", "train.env_hidden=16",
+    # mesh and export as small as they go: the DAG and the files, not the pictures, are tested here
+    "mesh.resolution=32", "export.view_size=8", "export.panorama_width=16", "export.video_frames=2",
+    "export.video_width=16", "export.video_height=12", "export.object_views=1", "export.object_downscale=4",
 ]
 
 
@@ -35,6 +39,10 @@ def test_the_dag_runs_decode_train_evaluate_then_nothing(tiny_capture, tmp_path)
     for stage in ("decode", "train", "evaluate"):
         assert (results / stage / "manifest.json").is_file(), stage
     assert (results / "evaluate" / "evaluate.json").is_file()
+    for stage, artifact in (("mesh", "mesh.ply"), ("export", "videos/orbit.mp4"), ("export", "panorama")):
+        assert (results / stage / "manifest.json").is_file() and (results / stage / artifact).exists(), artifact
+    evaluation = json.loads((results / "evaluate" / "evaluate.json").read_text())
+    assert "chamfer" in evaluation["mesh"] and evaluation["poses"]["summary"]["rotation_deg_max"] < 1e-6
     again = snakemake(tmp_path)
     assert again.returncode == 0 and "Nothing to be done" in again.stdout + again.stderr
 
