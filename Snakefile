@@ -56,15 +56,29 @@ def capture_config(wildcards):
 
 
 def cameras_and_masks(wildcards):
-    """Cameras and masks for training. The poses and masks stages are not built yet, so only a synthetic
-    capture's ground truth can provide them."""
+    """Cameras and masks for training. The masks stage is not built yet, so only a synthetic capture's ground
+    truth can provide them (its cameras too: `orca evaluate` has no frame alignment yet)."""
     gt = CAPTURES_DIR / wildcards.capture / "ground_truth"
     if (gt / "cameras.json").is_file() and (gt / "masks").is_dir():
         return {"cameras": str(gt / "cameras.json"), "masks": str(gt / "masks")}
+    c = wildcards.capture
     raise ValueError(
-        f"capture {wildcards.capture!r} has no ground_truth/cameras.json and masks/: training a real capture "
-        "needs the poses and masks stages, which are not built yet (for now: `orca train --cameras --masks`)."
+        f"capture {c!r} has no ground_truth/cameras.json and masks/: training a real capture needs object masks, "
+        f"and the masks stage is not built yet. Run the poses stage (snakemake {RESULTS_DIR}/{c}/poses), then "
+        f"`orca train --decode {RESULTS_DIR}/{c}/decode --cameras {RESULTS_DIR}/{c}/poses/cameras.json "
+        "--masks <your masks>` (--decode .../poses/undistorted if the poses stage wrote that folder)."
     )
+
+
+def poses_inputs(wildcards):
+    """What the poses stage reads from the capture when present: a calibration, its own cameras, masks."""
+    capture = CAPTURES_DIR / wildcards.capture
+    found = {}
+    for key, rel in (("calibration", "calibration/calibration.json"), ("cameras", "cameras.json"),
+                     ("transforms", "transforms.json"), ("masks", "masks")):
+        if (capture / rel).exists():
+            found[key] = str(capture / rel)
+    return found
 
 
 def has_ground_truth(capture):
@@ -73,6 +87,7 @@ def has_ground_truth(capture):
 
 rule all:
     input:
+        expand(RESULTS_DIR / "{capture}" / "poses", capture=CAPTURES),
         expand(RESULTS_DIR / "{capture}" / "train", capture=CAPTURES),
         expand(RESULTS_DIR / "{capture}" / "mesh", capture=CAPTURES),
         expand(RESULTS_DIR / "{capture}" / "export", capture=CAPTURES),
@@ -90,6 +105,23 @@ rule decode:
         RESULTS_DIR / "{capture}" / "logs" / "decode.log",
     shell:
         "{ORCA} decode {CAPTURES_DIR}/{wildcards.capture} --out {output} --preset {PRESET} {SET} > {log} 2>&1"
+
+
+rule poses:
+    """Decoded photos -> cameras.json in the object-centred unit-sphere frame (pycolmap SfM, or the capture's
+    own cameras.json / transforms.json), transforms.json, sparse/, poses_report.json, poses.png."""
+    input:
+        unpack(poses_inputs),
+        decode=RESULTS_DIR / "{capture}" / "decode",
+        capture_yaml=capture_config,
+    output:
+        directory(RESULTS_DIR / "{capture}" / "poses"),
+    log:
+        RESULTS_DIR / "{capture}" / "logs" / "poses.log",
+    threads: 4
+    shell:
+        "{ORCA} poses {CAPTURES_DIR}/{wildcards.capture} --decode {input.decode} --out {output} --preset {PRESET} "
+        "--set poses.num_threads={threads} {SET} > {log} 2>&1"
 
 
 rule train:

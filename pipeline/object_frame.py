@@ -7,12 +7,16 @@ sphere becomes the unit sphere at the origin, z up.
   of their visual hull is used instead (exact up to the voxel size). When the axes are nearly parallel (a
   forward-facing capture, not an orbit) the convergence is undetermined; then the median of the sparse points
   seen in the middle of most photos is used.
-- **Radius**: with masks, the bounding sphere of their visual hull. Without, the largest of
+- **Radius**: with masks, the bounding sphere of their visual hull, cut at the support plane (cameras that
+  all look down leave the hull an open cone under the object). On the synthetic sphere (20 views) the hull's
+  sphere is 7 % wider than the object and its centre 0.7 % of the radius off. Without masks, the largest of
   1. the framing: the sphere at the centre that fills ``object_window`` of the shorter side of the median
      photo (the design's captures frame the object at a third of the photo or less, so 0.6 is generous);
   2. the support plane: the object stands on a table or floor, found by RANSAC among the sparse points in
      the middle of most photos (normal along the cameras' up, below the centre); the object touches it, so
      its bounding sphere reaches at least that far (times ``radius_margin``).
+  On the synthetic captures (the object spans ~0.38 of the shorter side) the framing wins and gives 1.55x
+  the true radius: the object fills the inner 0.64 of the unit sphere.
   Why not the sparse points on the object: a glossy object has almost none. On the synthetic glossy sphere
   (16 views, 320x240) not one of ~1000 sparse points lies on its surface; the points that survive a
   "central in nearly every photo" test are the floor around it, props' edges and view-dependent reflection
@@ -139,35 +143,54 @@ def footprint_radius(center: np.ndarray, c2w: np.ndarray, K: np.ndarray, sizes: 
     return float(np.median(dist * np.sin(np.arctan(half))))
 
 
+def _carve(masks: Sequence[np.ndarray], c2w: np.ndarray, K: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+           resolution: int, keep_fraction: float, floor: tuple[np.ndarray, float] | None) -> tuple[np.ndarray, np.ndarray]:
+    """Voxel centres ``(V, 3)`` of the box ``[lo, hi]`` kept by the masks, and the voxel size ``(3,)``."""
+    size = (hi - lo) / resolution
+    axes = [lo[k] + (np.arange(resolution) + 0.5) * size[k] for k in range(3)]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    seen = np.zeros(len(grid), np.int32)
+    hits = np.zeros(len(grid), np.int32)
+    for m, c, k in zip(masks, c2w, K):  # one camera at a time: memory stays O(voxels)
+        uv, z = project(grid, c[None], k[None])
+        h, w = m.shape
+        x = np.floor(uv[0, :, 0]).astype(np.int64)
+        y = np.floor(uv[0, :, 1]).astype(np.int64)
+        inside = (z[0] > 0) & (x >= 0) & (x < w) & (y >= 0) & (y < h)
+        seen += inside
+        hits[inside] += m[y[inside], x[inside]]
+    keep = (seen >= 0.5 * len(masks)) & (hits >= keep_fraction * seen)
+    if floor is not None:
+        keep &= grid @ floor[0] >= floor[1]
+    return grid[keep], size
+
+
 def sphere_from_masks(masks: Sequence[np.ndarray], c2w: np.ndarray, K: np.ndarray, center: np.ndarray,
-                      extent: float, resolution: int = 64, keep_fraction: float = 0.95) -> tuple[np.ndarray, float] | None:
+                      extent: float, resolution: int = 64, keep_fraction: float = 0.95,
+                      floor: tuple[np.ndarray, float] | None = None) -> tuple[np.ndarray, float] | None:
     """Bounding sphere of the visual hull of object masks (a voxel carving), or None if it is empty.
+
+    Two passes: the cube ``center +- extent``, then the box around what survived (so the voxels are small
+    where the object is: the sphere's centre and radius are good to a fraction of a percent).
 
     Args:
         masks: ``N`` ``(H, W)`` bool, True on the object, in the cameras' pixel grid.
-        center, extent: the carving cube is ``center +- extent``.
-        keep_fraction: a voxel stays if it projects onto the object (or outside the photo) in this share of
-            the photos; a mask that misses a sliver then does not cut the object.
+        keep_fraction: a voxel stays if it projects onto the object in this share of the photos that see it
+            (a mask that misses a sliver then does not cut the object); it must be seen by half the photos
+            (a voxel outside most photos has no evidence for it either).
+        floor: ``(n, d)``, the support plane ``n . x = d`` with ``n`` up: voxels below it are cut. Cameras
+            that all look down leave the hull a cone under the object down to (and through) the floor; the
+            plane cuts it off.
     """
-    g = (np.arange(resolution) + 0.5) / resolution * 2 - 1
-    grid = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3) * extent + center
-    uv, z = project(grid, c2w, K)
-    votes = np.zeros(len(grid))
-    for i, m in enumerate(masks):
-        h, w = m.shape
-        x = np.floor(uv[i, :, 0]).astype(np.int64)
-        y = np.floor(uv[i, :, 1]).astype(np.int64)
-        inside = (z[i] > 0) & (x >= 0) & (x < w) & (y >= 0) & (y < h)
-        hit = np.ones(len(grid), bool)  # outside the photo: no evidence against the voxel
-        hit[inside] = m[y[inside], x[inside]]
-        votes += hit
-    keep = grid[votes >= keep_fraction * len(masks)]
-    if len(keep) == 0:
-        return None
-    voxel = 2 * extent / resolution
-    lo, hi = keep.min(0) - voxel / 2, keep.max(0) + voxel / 2
+    lo, hi = center - extent, center + extent
+    for _ in range(2):
+        kept, size = _carve(masks, c2w, K, lo, hi, resolution, keep_fraction, floor)
+        if len(kept) == 0:
+            return None
+        lo, hi = kept.min(0) - size, kept.max(0) + size  # one voxel of slack around the first pass's hull
+    lo, hi = kept.min(0) - size / 2, kept.max(0) + size / 2
     c = (lo + hi) / 2
-    return c, float(np.linalg.norm(keep - c, axis=1).max() + voxel * np.sqrt(3) / 2)
+    return c, float(np.linalg.norm(kept - c, axis=1).max() + np.linalg.norm(size) / 2)
 
 
 def find_object(
@@ -202,28 +225,35 @@ def find_object(
         else:
             center = centers.mean(0) + dirs.mean(0) * np.median(np.linalg.norm(centers - centers.mean(0), axis=1))
 
-    framing = footprint_radius(center, c2w, K, sizes, window)
-    if masks is not None:
-        hull = sphere_from_masks(masks, c2w, K, center, 2.0 * framing)
-        if hull is not None:
-            c, r = hull
-            return ObjectSphere(c, r * margin, up, "masks", conv, axes_rms, 0, notes)
-        notes.append("the masks' visual hull is empty (masks and cameras disagree); masks not used")
-
-    radius, method, used = framing, "framing", 0
+    # The support plane (table or floor): the object stands on it, nothing of it lies below.
+    plane: tuple[np.ndarray, float] | None = None  # (unit normal pointing up, offset): n . x = offset on it
+    used = 0
     if have_points:
         near = points[frac >= 0.5]
         dist = np.linalg.norm(near - center, axis=1)
-        plane = support_plane(near, up, tolerance=0.02 * float(np.median(dist)) if len(near) else 0.0,
-                              rng=np.random.default_rng(seed))
-        if plane.any():
-            on = near[plane]
+        on_plane = support_plane(near, up, tolerance=0.02 * float(np.median(dist)) if len(near) else 0.0,
+                                 rng=np.random.default_rng(seed))
+        if on_plane.any():
+            on = near[on_plane]
             n = np.linalg.svd(on - on.mean(0))[2][2]
-            h = float(abs((center - on.mean(0)) @ n))
-            notes.append(f"support plane {h:.3g} below the centre ({int(plane.sum())} points)")
-            used = int(plane.sum())
-            if h * margin > radius:
-                radius, method = h * margin, "support plane"
+            n = n if n @ up > 0 else -n
+            plane = (n, float(n @ on.mean(0)))
+            used = int(on_plane.sum())
+            notes.append(f"support plane {float(n @ center) - plane[1]:.3g} below the centre ({used} points)")
+
+    framing = footprint_radius(center, c2w, K, sizes, window)
+    if masks is not None:
+        hull = sphere_from_masks(masks, c2w, K, center, 2.0 * framing, floor=plane)
+        if hull is not None:
+            c, r = hull
+            return ObjectSphere(c, r * margin, up, "masks", conv, axes_rms, used, notes)
+        notes.append("the masks' visual hull is empty (masks and cameras disagree); masks not used")
+
+    radius, method = framing, "framing"
+    if plane is not None:
+        h = float(plane[0] @ center) - plane[1]
+        if h * margin > radius:
+            radius, method = h * margin, "support plane"
     return ObjectSphere(center, radius, up, method, conv, axes_rms, used, notes)
 
 

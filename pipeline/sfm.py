@@ -78,7 +78,7 @@ def quiet_colmap(verbose: bool) -> None:
     """COLMAP logs every step through glog; keep its errors and our own summary unless debugging."""
     import pycolmap
 
-    pycolmap.logging.minloglevel = 0 if verbose else 2
+    pycolmap.logging.minloglevel = 0 if verbose else 3  # our own errors say what its ERROR lines would
 
 
 # ------------------------------------------------------------------------------------- checks before SfM
@@ -95,7 +95,10 @@ def check_not_identical(images: dict[str, np.ndarray], folder: Path, tolerance: 
     """
     import cv2
 
-    names = list(images)
+    # Blank photos are all alike too, but the feature check explains them better: leave them to it.
+    names = [n for n in images if float(np.std(images[n])) >= 2.0]
+    if not names:
+        return []
     thumbs = np.stack([
         cv2.resize(cv2.cvtColor(images[n], cv2.COLOR_RGB2GRAY), (32, 24), interpolation=cv2.INTER_AREA)
         for n in names
@@ -123,15 +126,20 @@ def check_not_identical(images: dict[str, np.ndarray], folder: Path, tolerance: 
 
 def check_features(features: dict[str, int], pixel_std: dict[str, float], config: PosesConfig, folder: Path) -> None:
     """Stop when so many photos have no features that too few could ever register; warn about the others."""
-    poor = [n for n, k in features.items() if k < config.min_features]
+    poor = sorted(n for n, k in features.items() if k < config.min_features)
     if not poor:
         return
     usable = len(features) - len(poor)
     needed = required_registered(len(features), config)
     blank = [n for n in poor if pixel_std.get(n, 1.0) < 2.0]
     detail = ", ".join(f"{n} ({features[n]})" for n in poor[:12]) + (" ..." if len(poor) > 12 else "")
-    what = (f"{len(blank)} of them are blank (one flat colour)" if blank else
-            "they are too dark, too blurred or show only plain surfaces")
+    if len(blank) == len(poor):
+        what = "they are blank (one flat colour)"
+    elif blank:
+        what = f"{len(blank)} of them are blank (one flat colour), the others too dark, blurred or plain"
+    else:
+        what = "they are too dark, too blurred or show only plain surfaces"
+
     if usable < needed:
         raise InputError(
             f"{len(poor)} of {len(features)} photos have (almost) no SIFT features (fewer than "
@@ -255,7 +263,7 @@ def run_sfm(
         pairing.match_list_path = str(pair_file)
         pycolmap.match_image_pairs(db_path, matching_options=matching, pairing_options=pairing,
                                    verification_options=verification, device=pycolmap.Device.auto)
-    num_verified = _verified_pairs(db_path)
+    num_verified = _verified_pairs(db_path, verification.min_num_inliers)
     seconds["matching"] = time.time() - t
     log.info("matching (%s): %d pairs, %d with a verified geometry [%.1f s]", matcher, num_pairs, num_verified,
              seconds["matching"])
@@ -314,12 +322,15 @@ def _feature_counts(db_path: Path) -> dict[str, int]:
         db.close()
 
 
-def _verified_pairs(db_path: Path) -> int:
+def _verified_pairs(db_path: Path, min_inliers: int) -> int:
+    """Image pairs whose two-view geometry holds at least ``min_inliers`` matches (the database also keeps
+    rows for pairs that failed verification)."""
     import pycolmap
 
     db = pycolmap.Database.open(db_path)
     try:
-        return int(db.num_verified_image_pairs())
+        _, geometries = db.read_two_view_geometries()
+        return sum(len(g.inlier_matches) >= min_inliers for g in geometries)
     finally:
         db.close()
 

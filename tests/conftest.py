@@ -45,3 +45,45 @@ def float64():
     torch.set_default_dtype(torch.float64)
     yield
     torch.set_default_dtype(old)
+
+
+def _sfm_capture(tmp_path_factory, scene: str, views: int, spp: int, seed: int) -> Path:
+    """A JPEG capture big enough for SfM: 320x240 with the scene's full room textures (``helpers.small``'s
+    coarse textures leave too few SIFT features: 20 views at 160x120 or with coarse textures do not register)."""
+    pytest.importorskip("mitsuba")
+    from pipeline.synth import SCENES, SynthOptions, render_capture
+
+    options = SynthOptions(views=views, width=320, height=240, spp=spp, format="jpg", env_size=16, coverage_spp=4,
+                           seed=seed)
+    return render_capture(SCENES[scene], tmp_path_factory.mktemp(f"sfm_{scene}") / scene, options)
+
+
+def _decode(capture: Path, tmp_path_factory) -> Path:
+    from pipeline.config import DecodeConfig
+    from pipeline.stages.decode import run_decode
+
+    out = tmp_path_factory.mktemp(f"{capture.name}_results") / "decode"
+    run_decode(capture, out, DecodeConfig())
+    return out
+
+
+@pytest.fixture(scope="session")
+def sfm_sphere_capture(tmp_path_factory) -> Path:
+    """20 views of the glossy sphere at 320x240 (~45 s to render); SfM registers all of them."""
+    return _sfm_capture(tmp_path_factory, "sphere", views=20, spp=8, seed=0)
+
+
+@pytest.fixture(scope="session")
+def sfm_sphere_decode(sfm_sphere_capture, tmp_path_factory) -> Path:
+    return _decode(sfm_sphere_capture, tmp_path_factory)
+
+
+@pytest.fixture(scope="session")
+def sfm_torus_capture(tmp_path_factory) -> Path:
+    """20 views of the glossy torus (non-convex) at 320x240, 4 samples per pixel (~30 s to render)."""
+    return _sfm_capture(tmp_path_factory, "torus", views=20, spp=4, seed=1)
+
+
+@pytest.fixture(scope="session")
+def sfm_torus_decode(sfm_torus_capture, tmp_path_factory) -> Path:
+    return _decode(sfm_torus_capture, tmp_path_factory)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.alignment import Similarity, compare_poses, fit_similarity, rotation_angle_deg
+from pipeline.alignment import Similarity, compare_poses, fit_similarity, mean_rotation, rotation_angle_deg
 from pipeline.cameras import look_at
 
 
@@ -61,3 +61,23 @@ def test_compare_poses_is_zero_for_the_same_cameras_in_another_frame():
     assert err.similarity.scale == pytest.approx(1 / 0.3)
     s = err.summary(scale=4.0)
     assert s["center_max_fraction"] < 1e-9
+    err = compare_poses(sim.apply_c2w(c2w), c2w, rotation_from="orientations")
+    assert err.rotation_deg.max() < 1e-6 and err.center.max() < 1e-9
+
+
+def test_orientation_alignment_keeps_centre_noise_out_of_rotation_errors():
+    """Noisy centres tilt a centre-only alignment; aligning rotations on the orientations does not."""
+    rng = np.random.default_rng(3)
+    c2w = np.stack([look_at(6 * np.array([np.cos(a), np.sin(a), 0.5]), np.zeros(3))
+                    for a in np.linspace(0, 2 * np.pi, 16, endpoint=False)])
+    noisy = c2w.copy()
+    noisy[:, :3, 3] += rng.normal(scale=0.03, size=(16, 3))
+    by_centres = compare_poses(noisy, c2w)
+    by_orientations = compare_poses(noisy, c2w, rotation_from="orientations")
+    assert by_orientations.rotation_deg.max() < 1e-9 < np.median(by_centres.rotation_deg)
+    assert by_orientations.center.max() < 3 * 0.03 * np.sqrt(3)
+
+
+def test_mean_rotation_of_equal_rotations_is_that_rotation():
+    r = random_rotation(np.random.default_rng(4))
+    np.testing.assert_allclose(mean_rotation(np.stack([r, r, r])), r, atol=1e-12)

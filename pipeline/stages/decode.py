@@ -2,7 +2,8 @@
 
 Where the photos are: in ``CAPTURE/images/`` if that folder exists (then nothing else is read as a photo),
 otherwise at the top level of ``CAPTURE/``. Sub-folders (``masks/``, ``calibration/``, ``ground_truth/``,
-...) are never searched, and ``capture.yaml`` and hidden files are not photos. Any other file in the photo
+...) are never searched, and ``capture.yaml``, known cameras (``cameras.json``, ``transforms.json``) and hidden files
+are not photos. Any other file in the photo
 folder that is not a photo (RAW: DNG, CR2, CR3, NEF, ARW, RAF, ORF, RW2, PEF, KDC, ...; JPEG, PNG, TIFF) is
 skipped with a warning naming it. When a RAW and a JPEG/PNG/TIFF share a name (RAW+JPEG shooting) the RAW
 is used and the other skipped with a warning.
@@ -50,7 +51,7 @@ if TYPE_CHECKING:
 log = logging.getLogger("orca.decode")
 
 PHOTO_SUBDIR = "images"
-NOT_PHOTOS = {"capture.yaml", "capture.yml"}
+NOT_PHOTOS = {"capture.yaml", "capture.yml", "cameras.json", "transforms.json"}  # the last two: known cameras
 EXPOSURE_FIELDS = ("shutter_s", "iso", "f_number")
 DECODE_JSON = "decode.json"
 SCHEMA_VERSION = 1

@@ -240,53 +240,13 @@ def _calibration(capture_dir: Path, width: int, height: int) -> tuple[str, list[
     path = capture_dir / "calibration" / "calibration.json"
     if not path.is_file():
         return None
-    try:
-        from calibration.result import load_calibration
-    except ImportError:  # the calibration package is optional for this stage: read the documented JSON
-        load_calibration = _read_calibration_json
+    from calibration import load_calibration
+
     calib = load_calibration(path).scaled_to(width, height)
     model, params = calib.colmap_params()
     log.info("intrinsics from %s (%s, fx %.1f fy %.1f at %dx%d), held fixed", path, model, params[0], params[1],
              width, height)
     return model, [float(p) for p in params], path
-
-
-def _read_calibration_json(path: Path) -> Any:
-    """calibration.json without the calibration package: {model, width, height, fx, fy, cx, cy, dist}."""
-    from pydantic import BaseModel, ConfigDict, ValidationError
-
-    from ..artifacts import read_json
-
-    class _Calib(BaseModel):
-        model_config = ConfigDict(extra="ignore")
-        model: str = "OPENCV"
-        width: int
-        height: int
-        fx: float
-        fy: float
-        cx: float
-        cy: float
-        dist: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
-        pixel_convention: str = "colmap"
-
-        def scaled_to(self, w: int, h: int) -> _Calib:
-            sx, sy = w / self.width, h / self.height
-            if abs(sx / sy - 1) > 0.01:
-                raise InputError(f"the calibration is for {self.width}x{self.height} photos, these are {w}x{h}",
-                                 path, fix="calibrate photos of the capture's orientation and aspect ratio")
-            shift = 0.5 if self.pixel_convention == "opencv" else 0.0
-            return self.model_copy(update={"width": w, "height": h, "fx": self.fx * sx, "fy": self.fy * sy,
-                                           "cx": (self.cx + shift) * sx, "cy": (self.cy + shift) * sy})
-
-        def colmap_params(self) -> tuple[str, list[float]]:
-            k1, k2, p1, p2, k3 = self.dist
-            base = [self.fx, self.fy, self.cx, self.cy, k1, k2, p1, p2]
-            return ("OPENCV", base) if self.model == "OPENCV" else ("FULL_OPENCV", base + [k3, 0.0, 0.0, 0.0])
-
-    try:
-        return _Calib.model_validate(read_json(path))
-    except (ValueError, ValidationError) as e:
-        raise InputError(f"invalid calibration.json: {e}", path, fix="rerun `orca calibrate`") from e
 
 
 def camera_groups(decoded: DecodeArtifacts, names: list[str], width: int, height: int, config: PosesConfig,
@@ -366,12 +326,13 @@ def _posed_from_sfm(decoded: DecodeArtifacts, names: list[str], calibration: tup
         "models": sfm.model_sizes,
         "other_models": sfm.other_models,
         "features": {"min": min(sfm.features.values()), "median": int(np.median(list(sfm.features.values()))),
-                     "max": max(sfm.features.values()), "per_image": sfm.features},
+                     "max": max(sfm.features.values()), "per_image": dict(sorted(sfm.features.items()))},
         "points3D": rec.num_points3D(),
         "mean_reprojection_error_px": float(rec.compute_mean_reprojection_error()),
         "mean_track_length": float(rec.compute_mean_track_length()),
         "mean_observations_per_image": float(rec.compute_mean_observations_per_reg_image()),
-        "reprojection_error_px_per_image": {stem_of(rec.images[i].name): e for i, e in per_image_error.items()},
+        "reprojection_error_px_per_image": dict(sorted((stem_of(rec.images[i].name), e)
+                                                       for i, e in per_image_error.items())),
         "camera_groups": [{"photos": len(g.names), "model": g.model, "intrinsics_from": g.source, "fixed": g.fixed}
                           for g in groups],
         "seconds": {k: round(v, 2) for k, v in sfm.seconds.items()},

@@ -1,0 +1,402 @@
+"""The poses stage: SfM on synthetic captures against their ground truth, real photos (fountain-P11), known
+cameras (transforms.json / cameras.json), undistortion, and the messages for captures SfM cannot solve."""
+
+from __future__ import annotations
+
+import shutil
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.alignment import compare_poses
+from pipeline.artifacts import read_json
+from pipeline.cameras import CameraSet, load_cameras, save_cameras
+from pipeline.config import ConfigError, PosesConfig, load_config
+from pipeline.errors import InputError
+from pipeline.sfm import required_registered, sequential_pairs
+from pipeline.transforms import load_transforms, opengl_from_opencv, save_transforms, to_transforms
+
+FOUNTAIN = Path(__file__).resolve().parents[1] / ".." / "shared" / "testdata" / "sfm" / "fountain-P11"
+CONFIG = PosesConfig(num_threads=2)
+
+
+def run(capture: Path, decode: Path, out: Path, config: PosesConfig = CONFIG, **kwargs):
+    from pipeline.stages.poses import run_poses
+
+    return run_poses(capture, decode, out, config, **kwargs)
+
+
+def errors_against_truth(cameras: CameraSet, truth: CameraSet) -> dict[str, float]:
+    """Pose errors after a similarity alignment, and where the true object centre (the ground truth's
+    origin) lands in the normalized frame, in unit-sphere radii.
+
+    Rotation errors: the similarity's rotation from the cameras' orientations (a centre-only Umeyama tilts
+    by its centres' noise, ~0.15 degrees here, and adds that to every camera); both are returned.
+    Centre errors: Umeyama on the centres, as a fraction of the orbit radius (median camera distance)."""
+    gt = truth.by_name()
+    est = cameras.c2w()
+    ref = np.stack([gt[c.name].c2w for c in cameras.cameras])
+    by_centres = compare_poses(est, ref)
+    by_orientations = compare_poses(est, ref, rotation_from="orientations")
+    radius = float(np.median(np.linalg.norm(ref[:, :3, 3], axis=1)))
+    centre = by_centres.similarity.inverse().apply(np.zeros(3))
+    return {
+        "rotation_deg_median": float(np.median(by_orientations.rotation_deg)),
+        "rotation_deg_median_centre_aligned": float(np.median(by_centres.rotation_deg)),
+        "centre_median_fraction": float(np.median(by_centres.center) / radius),
+        "centre_max_fraction": float(by_centres.center.max() / radius),
+        "object_centre_offset": float(np.linalg.norm(centre)),
+        "true_radius_normalized": 1.0 / by_centres.similarity.scale,
+    }
+
+
+def assert_no_output(out: Path) -> None:
+    assert not out.exists(), f"{out} was left behind"
+    assert not [p for p in out.parent.iterdir() if p.name.startswith(f".{out.name}")], "temporary folder left behind"
+
+
+# ------------------------------------------------------------------------------------------------ units
+
+
+def test_sequential_pairs_wrap_around_the_capture():
+    names = [f"IMG_{i:02d}" for i in range(10)]
+    pairs = set(sequential_pairs(names, overlap=2))
+    assert ("IMG_00", "IMG_01") in pairs and ("IMG_00", "IMG_02") in pairs
+    assert ("IMG_00", "IMG_09") in pairs and ("IMG_01", "IMG_09") in pairs  # the circle closes
+    assert ("IMG_00", "IMG_04") in pairs and ("IMG_00", "IMG_08") in pairs  # 2^k apart: loop closure
+    assert ("IMG_00", "IMG_05") not in pairs
+    assert all(a < b for a, b in pairs)
+    assert len(sequential_pairs(names, overlap=20)) == 45  # more neighbours than photos: every pair once
+
+
+def test_required_registered_uses_count_and_fraction():
+    config = PosesConfig(min_registered=3, min_registered_fraction=0.75)
+    assert required_registered(20, config) == 15
+    assert required_registered(3, config) == 3
+    assert required_registered(2, config) == 2  # never more than there are photos
+
+
+def test_poses_config_is_validated():
+    assert load_config(preset="fast").poses.max_image_size == 1024
+    with pytest.raises(ConfigError, match="matcher"):
+        load_config(overrides=["poses.matcher=vocabulary"])
+    with pytest.raises(ConfigError, match="min_registered_fraction"):
+        load_config(overrides=["poses.min_registered_fraction=1.5"])
+    with pytest.raises(ConfigError, match="unknown_key"):
+        load_config(overrides=["poses.unknown_key=1"])
+
+
+def test_transforms_json_round_trips_cameras(tmp_path):
+    from pipeline.cameras import Camera, look_at
+
+    cams = CameraSet(cameras=[
+        Camera(name=f"v{i}", image=f"images/v{i}.jpg", width=64, height=48, fx=60.0 + i, fy=61.0, cx=31.5, cy=24.5,
+               camera_to_world=look_at(np.array([4.0 * np.cos(i), 4.0 * np.sin(i), 1.0 + i]), np.zeros(3)).tolist())
+        for i in range(3)
+    ])
+    save_transforms(tmp_path / "transforms.json", cams)
+    doc = read_json(tmp_path / "transforms.json")
+    assert "fl_x" in doc["frames"][0]  # focal lengths differ: per-frame intrinsics
+    # OpenGL axes in the file: the camera looks along its -z
+    np.testing.assert_allclose(np.asarray(doc["frames"][0]["transform_matrix"])[:3, 2], -cams.cameras[0].c2w[:3, 2])
+    back = load_transforms(tmp_path / "transforms.json")
+    assert not back.distortion
+    for a, b in zip(cams.cameras, back.cameras.cameras):
+        assert a.name == b.name and (a.fx, a.fy, a.cx, a.cy, a.width, a.height) == (b.fx, b.fy, b.cx, b.cy, b.width, b.height)
+        np.testing.assert_allclose(a.c2w, b.c2w, atol=1e-12)
+    np.testing.assert_array_equal(opengl_from_opencv(opengl_from_opencv(cams.cameras[0].c2w)), cams.cameras[0].c2w)
+
+
+def test_undistort_map_sends_pinhole_pixels_to_where_the_lens_put_them():
+    import pycolmap
+
+    from pipeline.stages.poses import undistort_map
+
+    cam = pycolmap.Camera(model="OPENCV", width=80, height=60, params=[70.0, 71.0, 40.3, 29.8, -0.2, 0.05, 1e-3, -2e-3])
+    mx, my, shift = undistort_map(cam)
+    assert mx.shape == (60, 80) and shift > 1.0
+    for x, y in [(0, 0), (79, 59), (10, 45), (40, 30)]:
+        ray = np.array([(x + 0.5 - 40.3) / 70.0, (y + 0.5 - 29.8) / 71.0, 1.0])
+        distorted = cam.img_from_cam(ray[None])[0]
+        np.testing.assert_allclose([mx[y, x] + 0.5, my[y, x] + 0.5], distorted, atol=1e-4)
+
+
+# ------------------------------------------------------------------------------------- known cameras
+
+
+def test_known_transforms_json_skips_sfm_and_round_trips(tiny_capture, tiny_decode, tmp_path):
+    """A capture with its own transforms.json: cameras.json holds the same cameras, in the normalized frame;
+    to_colmap maps them back to the file's frame exactly."""
+    truth = load_cameras(tiny_capture / "ground_truth" / "cameras.json")
+    capture = tmp_path / "capture"
+    capture.mkdir()
+    save_transforms(capture / "transforms.json", truth)
+    result = run(capture, tiny_decode, tmp_path / "poses")
+    assert result.source.endswith("transforms.json") and result.registered == len(truth)
+    out = load_cameras(tmp_path / "poses" / "cameras.json")
+    to_file = np.asarray(out.frame.to_colmap)
+    scale = np.cbrt(np.linalg.det(to_file[:3, :3]))
+    for a, b in zip(truth.cameras, out.cameras):
+        assert a.name == b.name
+        np.testing.assert_allclose(b.K, a.K, atol=1e-9)
+        back = to_file @ b.c2w
+        back[:3, :3] /= scale
+        np.testing.assert_allclose(back, a.c2w, atol=1e-9)
+    # every camera's image exists where cameras.json says
+    for cam in out.cameras:
+        assert (tmp_path / "poses" / cam.image).is_file()
+    report = read_json(tmp_path / "poses" / "poses_report.json")
+    assert report["registered"] == report["total"] == len(truth) and not report["undistorted"]
+    assert (tmp_path / "poses" / "poses.png").is_file() and not (tmp_path / "poses" / "sparse").exists()
+    # the normalized frame's transforms.json holds the normalized cameras
+    again = load_transforms(tmp_path / "poses" / "transforms.json").cameras
+    np.testing.assert_allclose(again.c2w(), out.c2w(), atol=1e-9)
+
+
+def test_known_cameras_with_lens_distortion_are_undistorted(tiny_capture, tiny_decode, tmp_path):
+    """Distortion in a transforms.json: the decoded images are resampled into undistorted/ (decode's layout,
+    so `orca train --decode` reads it) and cameras.json points at them."""
+    from pipeline.results import load_decode
+
+    truth = load_cameras(tiny_capture / "ground_truth" / "cameras.json")
+    capture = tmp_path / "capture"
+    capture.mkdir()
+    doc = to_transforms(truth)
+    doc.update(k1=0.2, k2=0.02)  # pincushion: the pinhole image's corners lie outside the photo
+    (capture / "transforms.json").write_text(__import__("json").dumps(doc))
+    result = run(capture, tiny_decode, tmp_path / "poses")
+    assert result.undistorted
+    out = load_cameras(tmp_path / "poses" / "cameras.json")
+    assert all(c.image.startswith("undistorted/linear/") for c in out.cameras)
+    und = load_decode(tmp_path / "poses" / "undistorted")
+    name = und.names[0]
+    assert und.linear(name).shape == load_decode(tiny_decode).linear(name).shape
+    assert und.clipped(name)[0, 0]  # a corner the lens never saw: marked clipped, so training ignores it
+
+
+def test_known_cameras_that_match_no_photo_are_refused(tiny_capture, tiny_decode, tmp_path):
+    truth = load_cameras(tiny_capture / "ground_truth" / "cameras.json")
+    renamed = CameraSet(cameras=[c.model_copy(update={"name": f"other_{c.name}"}) for c in truth.cameras])
+    capture = tmp_path / "capture"
+    capture.mkdir()
+    save_cameras(capture / "cameras.json", renamed)
+    with pytest.raises(InputError, match="matched to photos by file name") as e:
+        run(capture, tiny_decode, tmp_path / "poses")
+    assert "cameras.json" in str(e.value)
+    assert_no_output(tmp_path / "poses")
+
+
+# ------------------------------------------------------------------------------------- synthetic SfM
+
+
+@pytest.mark.slow
+def test_sphere_capture_registers_every_view_accurately(sfm_sphere_capture, sfm_sphere_decode, tmp_path):
+    started = time.time()
+    result = run(sfm_sphere_capture, sfm_sphere_decode, tmp_path / "poses")
+    seconds = time.time() - started
+    truth = load_cameras(sfm_sphere_capture / "ground_truth" / "cameras.json")
+    assert result.source == "sfm" and result.registered == result.total == len(truth) == 20
+    err = errors_against_truth(result.cameras, truth)
+    print(f"sphere: {result.registered}/{result.total} in {seconds:.1f} s, {err}")
+    assert err["rotation_deg_median"] <= 0.2, err
+    assert err["centre_median_fraction"] <= 0.005, err
+    assert err["object_centre_offset"] <= 0.02, err
+    assert 0.4 < err["true_radius_normalized"] <= 1.0, err  # the object fits in the unit sphere, not lost in it
+
+    out = tmp_path / "poses"
+    for f in ("cameras.json", "transforms.json", "poses_report.json", "poses.png", "manifest.json",
+              "sparse/images.bin", "sparse/points3D.bin"):
+        assert (out / f).is_file(), f
+    assert not (out / "work").exists() and not (out / "database.db").exists()
+    report = read_json(out / "poses_report.json")
+    assert report["registered"] == 20 and report["models"] == [20] and report["matcher"] == "exhaustive"
+    assert report["mean_reprojection_error_px"] < 1.0 and report["mean_track_length"] > 2.5
+    assert report["camera_groups"][0]["intrinsics_from"].startswith("EXIF")
+    assert not report["undistorted"]  # a pinhole renderer: no resampling
+    cams = load_cameras(out / "cameras.json")
+    assert all((out / c.image).is_file() and c.image.endswith(".exr") for c in cams.cameras)
+    assert np.allclose(np.asarray(cams.frame.to_colmap)[3], [0, 0, 0, 1])
+
+
+@pytest.mark.slow
+def test_torus_capture_registers_every_view_accurately(sfm_torus_capture, sfm_torus_decode, tmp_path):
+    """The non-convex scene (rendered at 4 samples per pixel: noisier photos)."""
+    result = run(sfm_torus_capture, sfm_torus_decode, tmp_path / "poses")
+    truth = load_cameras(sfm_torus_capture / "ground_truth" / "cameras.json")
+    assert result.registered == result.total == len(truth) == 20
+    err = errors_against_truth(result.cameras, truth)
+    print(f"torus: {err}")
+    assert err["rotation_deg_median"] <= 0.2, err
+    assert err["centre_median_fraction"] <= 0.005, err
+    assert err["object_centre_offset"] <= 0.02, err
+
+
+@pytest.mark.slow
+def test_masks_ignore_the_object_and_give_its_sphere(sfm_sphere_capture, sfm_sphere_decode, tmp_path):
+    """With object masks the sphere is the masks' visual hull: centre and radius close to the truth."""
+    result = run(sfm_sphere_capture, sfm_sphere_decode, tmp_path / "poses",
+                 masks_dir=sfm_sphere_capture / "ground_truth" / "masks")
+    assert result.sphere.method == "masks" and result.registered == 20
+    err = errors_against_truth(result.cameras, load_cameras(sfm_sphere_capture / "ground_truth" / "cameras.json"))
+    print(f"sphere with masks: {err}")
+    assert err["object_centre_offset"] <= 0.02, err
+    assert 0.8 <= err["true_radius_normalized"] <= 1.0, err  # margin 1.1; the hull of 20 views is ~7 % wider: 0.85
+
+
+@pytest.mark.slow
+def test_a_calibration_fixes_the_intrinsics(sfm_sphere_capture, sfm_sphere_decode, tmp_path):
+    """calibration/calibration.json (here the renderer's true intrinsics, written for photos twice the size)
+    is scaled to the decoded size and held fixed by bundle adjustment."""
+    import json
+
+    truth = load_cameras(sfm_sphere_capture / "ground_truth" / "cameras.json")
+    t = truth.cameras[0]
+    capture = tmp_path / "capture"
+    (capture / "calibration").mkdir(parents=True)
+    (capture / "calibration" / "calibration.json").write_text(json.dumps({
+        "schema": 1, "model": "OPENCV", "width": 2 * t.width, "height": 2 * t.height, "fx": 2 * t.fx, "fy": 2 * t.fy,
+        "cx": 2 * t.cx, "cy": 2 * t.cy, "dist": [0, 0, 0, 0, 0], "pixel_convention": "colmap"}))
+    result = run(capture, sfm_sphere_decode, tmp_path / "poses")
+    assert result.registered == 20 and not result.undistorted
+    for cam in result.cameras.cameras:
+        assert (cam.fx, cam.fy, cam.cx, cam.cy) == pytest.approx((t.fx, t.fy, t.cx, t.cy), rel=1e-9)
+    report = read_json(tmp_path / "poses" / "poses_report.json")
+    assert report["camera_groups"][0]["fixed"] and "calibration" in report["camera_groups"][0]["intrinsics_from"]
+    err = errors_against_truth(result.cameras, truth)
+    print(f"sphere, calibrated: {err}")
+    assert err["rotation_deg_median"] <= 0.2 and err["centre_median_fraction"] <= 0.005, err
+
+
+# ------------------------------------------------------------------------------------------ real photos
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not FOUNTAIN.is_dir(), reason="../shared/testdata/sfm/fountain-P11 not present")
+def test_fountain_p11_real_photos(tmp_path):
+    """Strecha's fountain-P11: 11 real photos; decoded at half size (768x512) to keep it ~20 s on 2 cores."""
+    from pipeline.config import DecodeConfig
+    from pipeline.stages.decode import run_decode
+
+    decode = tmp_path / "decode"
+    run_decode(FOUNTAIN / "images", decode, DecodeConfig(downscale=2))
+    started = time.time()
+    result = run(FOUNTAIN / "images", decode, tmp_path / "poses")
+    seconds = time.time() - started
+    assert result.registered == result.total == 11
+    names, ref = [], []
+    for cam in result.cameras.cameras:
+        values = np.loadtxt(FOUNTAIN / "gt_cameras" / f"{cam.name}.jpg.camera", max_rows=8)
+        c2w = np.eye(4)
+        c2w[:3, :3], c2w[:3, 3] = values[4:7], values[7]  # rows 5-7: camera-to-world rotation, row 8: centre
+        names.append(cam.name)
+        ref.append(c2w)
+    ref = np.stack(ref)
+    err = compare_poses(result.cameras.c2w(), ref)
+    extent = float(np.linalg.norm(ref[:, :3, 3].max(0) - ref[:, :3, 3].min(0)))
+    frac = float(err.center.max() / extent)
+    print(f"fountain-P11: 11/11 in {seconds:.1f} s, centre error max {100 * frac:.3f} % median "
+          f"{100 * np.median(err.center) / extent:.3f} % of the extent, rotation median {np.median(err.rotation_deg):.2f} deg")
+    assert frac <= 0.005
+
+
+# ------------------------------------------------------------------------------------------ bad input
+
+
+def _png_capture(folder: Path, images: list[np.ndarray]) -> Path:
+    from pipeline import imageio
+
+    folder.mkdir(parents=True)
+    for i, img in enumerate(images):
+        imageio.write_png(folder / f"IMG_{i + 1:04d}.png", img)
+    return folder
+
+
+def _decoded(capture: Path, tmp_path: Path) -> Path:
+    from pipeline.config import DecodeConfig
+    from pipeline.stages.decode import run_decode
+
+    out = tmp_path / "results" / "decode"
+    run_decode(capture, out, DecodeConfig())
+    return out
+
+
+def _noise(seed: int, size=(240, 320)) -> np.ndarray:
+    """A textured image (blurred noise: plenty of SIFT features) unrelated to any other."""
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    img = cv2.GaussianBlur(rng.integers(0, 256, (*size, 3), dtype=np.uint8), (0, 0), 1.5)
+    return cv2.normalize(img, None, 0, 255, cv2.NORM_MINMAX)
+
+
+def test_blank_photos_are_refused_with_the_fix(tmp_path):
+    capture = _png_capture(tmp_path / "blank", [np.full((240, 320, 3), 128, np.uint8)] * 5)
+    out = tmp_path / "results" / "poses"
+    with pytest.raises(InputError) as e:
+        run(capture, _decoded(capture, tmp_path), out)
+    msg = str(e.value)
+    assert str(capture) in msg and "no SIFT features" in msg and "blank" in msg and "IMG_0001" in msg
+    assert "Fix:" in msg and "texture" in msg
+    assert_no_output(out)
+
+
+def test_identical_photos_are_refused_with_the_fix(tmp_path):
+    capture = _png_capture(tmp_path / "same", [_noise(0)] * 5)
+    out = tmp_path / "results" / "poses"
+    with pytest.raises(InputError) as e:
+        run(capture, _decoded(capture, tmp_path), out)
+    msg = str(e.value)
+    assert str(capture) in msg and "all 5 photos show the same picture" in msg
+    assert "Fix:" in msg and "walk around the object" in msg
+    assert_no_output(out)
+
+
+def test_unrelated_photos_give_no_model_and_the_fix(tmp_path):
+    capture = _png_capture(tmp_path / "unrelated", [_noise(s) for s in range(4)])
+    out = tmp_path / "results" / "poses"
+    with pytest.raises(InputError) as e:
+        run(capture, _decoded(capture, tmp_path), out)
+    msg = str(e.value)
+    assert str(capture) in msg and "SfM found no model" in msg and "Fix:" in msg and "overlap" in msg
+    assert_no_output(out)
+
+
+@pytest.mark.slow
+def test_too_few_registered_is_refused_with_the_names(sfm_sphere_decode, tmp_path):
+    """Ten neighbouring views of the sphere register; four unrelated photos cannot: 10/14 < 75 %."""
+    from pipeline.results import load_decode
+
+    dec = load_decode(sfm_sphere_decode)
+    views = [dec.srgb(n) for n in dec.names[:10]]
+    capture = _png_capture(tmp_path / "partial", views + [_noise(10 + s) for s in range(4)])
+    out = tmp_path / "results" / "poses"
+    decode = _decoded(capture, tmp_path)
+    with pytest.raises(InputError) as e:
+        run(capture, decode, out)
+    msg = str(e.value)
+    assert "only 10 of 14 photos registered, at least 11 needed" in msg, msg
+    assert "IMG_0011, IMG_0012, IMG_0013, IMG_0014" in msg and str(capture) in msg
+    assert "min_registered_fraction" in msg and "Fix:" in msg
+    assert_no_output(out)
+    # the threshold is config: accepting fewer photos works, and the report names the missing ones
+    result = run(capture, decode, out, PosesConfig(num_threads=2, min_registered_fraction=0.5))
+    assert result.registered == 10
+    report = read_json(out / "poses_report.json")
+    assert report["not_registered"] == ["IMG_0011", "IMG_0012", "IMG_0013", "IMG_0014"]
+    assert any("did not register" in w for w in report["warnings"])
+
+
+def test_cli_writes_results_next_to_decode(tiny_capture, tiny_decode, tmp_path, monkeypatch):
+    """`orca poses CAPTURE` reads results/<capture>/decode and writes results/<capture>/poses."""
+    from pipeline.cli import main
+
+    capture = tmp_path / "captures" / "tiny"
+    capture.mkdir(parents=True)
+    save_cameras(capture / "cameras.json", load_cameras(tiny_capture / "ground_truth" / "cameras.json"))
+    shutil.copytree(tiny_decode, tmp_path / "results" / "tiny" / "decode")
+    monkeypatch.chdir(tmp_path)
+    assert main(["poses", "captures/tiny", "--set", "num_threads=1"]) == 0
+    assert (tmp_path / "results" / "tiny" / "poses" / "cameras.json").is_file()
+    assert main(["poses", "captures/tiny", "--set", "matcher=bogus"]) == 2
