@@ -3,6 +3,9 @@
     >>> from pipeline.results import load_decode
     >>> dec = load_decode("results/demo/decode")
     >>> dec.names[:3], dec.linear(dec.names[0]).shape
+    >>> from pipeline.results import load_poses
+    >>> poses = load_poses("results/demo/poses")
+    >>> poses.cameras().c2w().shape, poses.report["registered"]
 """
 
 from __future__ import annotations
@@ -61,3 +64,35 @@ def load_decode(folder: str | Path) -> DecodeArtifacts:
     if not (folder / "decode.json").is_file():
         raise InputError("not a decode artifact (no decode.json)", folder, "run `orca decode` on the capture first")
     return DecodeArtifacts(folder)
+
+
+@dataclass(frozen=True)
+class PosesArtifacts:
+    """The poses stage's folder: ``cameras.json`` (normalized frame), ``poses_report.json``, ``sparse/``."""
+
+    folder: Path
+
+    @cached_property
+    def report(self) -> dict[str, Any]:
+        return read_json(self.folder / "poses_report.json")
+
+    def cameras(self):
+        """:class:`~pipeline.cameras.CameraSet` in the object-centred unit-sphere frame."""
+        from .cameras import load_cameras
+
+        return load_cameras(self.folder / "cameras.json")
+
+    def reconstruction(self):
+        """The COLMAP model (``pycolmap.Reconstruction``, COLMAP's frame); None for known cameras."""
+        if not (self.folder / "sparse").is_dir():
+            return None
+        import pycolmap
+
+        return pycolmap.Reconstruction(self.folder / "sparse")
+
+
+def load_poses(folder: str | Path) -> PosesArtifacts:
+    folder = Path(folder)
+    if not (folder / "cameras.json").is_file():
+        raise InputError("not a poses artifact (no cameras.json)", folder, "run `orca poses` on the capture first")
+    return PosesArtifacts(folder)

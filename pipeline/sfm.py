@@ -84,31 +84,35 @@ def quiet_colmap(verbose: bool) -> None:
 # ------------------------------------------------------------------------------------- checks before SfM
 
 
-def check_not_identical(images: dict[str, np.ndarray], folder: Path, tolerance: float = 1.0) -> list[list[str]]:
+def thumbnail(image: np.ndarray) -> np.ndarray:
+    """``(H, W, 3)`` uint8 sRGB -> ``(24, 32)`` float32 grey thumbnail (what the identical-photo check compares;
+    the stage keeps only these in memory, not 200 full photos)."""
+    import cv2
+
+    grey = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
+    return cv2.resize(grey, (32, 24), interpolation=cv2.INTER_AREA).astype(np.float32)
+
+
+def check_not_identical(thumbs: dict[str, np.ndarray], folder: Path, tolerance: float = 1.0) -> list[list[str]]:
     """Stop when every photo shows the same picture; return groups of near-duplicates otherwise.
 
     Args:
-        images: image stem -> ``(H, W, 3)`` uint8 sRGB.
-        tolerance: mean absolute difference of 32x24 grey thumbnails (8-bit levels) below which two photos
-            count as the same picture (sensor noise and JPEG artefacts stay well under it; a step of a few
-            degrees around an object moves far more).
+        thumbs: image stem -> :func:`thumbnail` of the photo.
+        tolerance: mean absolute difference of the thumbnails (8-bit levels) below which two photos count as
+            the same picture (sensor noise and JPEG artefacts stay well under it; a step of a few degrees
+            around an object moves far more).
     """
-    import cv2
-
     # Blank photos are all alike too, but the feature check explains them better: leave them to it.
-    names = [n for n in images if float(np.std(images[n])) >= 2.0]
+    names = [n for n in thumbs if float(np.std(thumbs[n])) >= 2.0]
     if not names:
         return []
-    thumbs = np.stack([
-        cv2.resize(cv2.cvtColor(images[n], cv2.COLOR_RGB2GRAY), (32, 24), interpolation=cv2.INTER_AREA)
-        for n in names
-    ]).astype(np.float32)
-    diff = np.abs(thumbs[:, None] - thumbs[None]).mean(axis=(2, 3))  # (N, N)
-    same = diff < tolerance
+    stack = np.stack([thumbs[n] for n in names])
+    same = np.stack([np.abs(stack - t).mean(axis=(1, 2)) < tolerance for t in stack])  # (N, N), row by row
     if len(names) > 1 and same.all():
+        worst = max(float(np.abs(stack - t).mean(axis=(1, 2)).max()) for t in stack)
         raise InputError(
             f"all {len(names)} photos show the same picture (mean difference of thumbnails "
-            f"{diff.max():.2f} levels): the camera did not move, so there is no parallax to find poses from",
+            f"{worst:.2f} levels): the camera did not move, so there is no parallax to find poses from",
             folder,
             fix="walk around the object between photos (burst mode or a tripod without moving it gives identical "
             "photos); " + FIX_OVERLAP,

@@ -147,9 +147,12 @@ def test_known_transforms_json_skips_sfm_and_round_trips(tiny_capture, tiny_deco
     # every camera's image exists where cameras.json says
     for cam in out.cameras:
         assert (tmp_path / "poses" / cam.image).is_file()
-    report = read_json(tmp_path / "poses" / "poses_report.json")
+    from pipeline.results import load_poses
+
+    loaded = load_poses(tmp_path / "poses")
+    report = loaded.report
     assert report["registered"] == report["total"] == len(truth) and not report["undistorted"]
-    assert (tmp_path / "poses" / "poses.png").is_file() and not (tmp_path / "poses" / "sparse").exists()
+    assert (tmp_path / "poses" / "poses.png").is_file() and loaded.reconstruction() is None
     # the normalized frame's transforms.json holds the normalized cameras
     again = load_transforms(tmp_path / "poses" / "transforms.json").cameras
     np.testing.assert_allclose(again.c2w(), out.c2w(), atol=1e-9)
@@ -215,8 +218,11 @@ def test_sphere_capture_registers_every_view_accurately(sfm_sphere_capture, sfm_
     assert report["mean_reprojection_error_px"] < 1.0 and report["mean_track_length"] > 2.5
     assert report["camera_groups"][0]["intrinsics_from"].startswith("EXIF")
     assert not report["undistorted"]  # a pinhole renderer: no resampling
-    cams = load_cameras(out / "cameras.json")
+    from pipeline.results import load_poses
+
+    cams = load_poses(out).cameras()
     assert all((out / c.image).is_file() and c.image.endswith(".exr") for c in cams.cameras)
+    assert load_poses(out).reconstruction().num_reg_images() == 20
     assert np.allclose(np.asarray(cams.frame.to_colmap)[3], [0, 0, 0, 1])
 
 

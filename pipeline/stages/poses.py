@@ -112,7 +112,7 @@ def run_poses(
     """Cameras for the decoded photos of ``capture_dir`` into ``out_dir`` (see the module doc)."""
     from ..artifacts import atomic_dir, write_json, write_manifest
     from ..results import load_decode
-    from ..sfm import check_not_identical, quiet_colmap
+    from ..sfm import check_not_identical, quiet_colmap, thumbnail
 
     started = time.time()
     capture_dir, decode_dir, out_dir = Path(capture_dir), Path(decode_dir), Path(out_dir)
@@ -140,8 +140,7 @@ def run_poses(
             posed = _posed_from_file(known_file, names, width, height)
             source = str(known_file)
         else:
-            images = {n: decoded.srgb(n) for n in names}
-            duplicates = check_not_identical(images, photo_dir)
+            duplicates = check_not_identical({n: thumbnail(decoded.srgb(n)) for n in names}, photo_dir)
             if duplicates:
                 log.warning("near-identical photos (the camera did not move between them): %s",
                             "; ".join(", ".join(g) for g in duplicates))
