@@ -200,6 +200,7 @@ def find_object(
     *,
     points: np.ndarray | None = None,
     masks: Sequence[np.ndarray] | None = None,
+    mask_scale: float = 1.0,
     window: float = 0.6,
     margin: float = 1.1,
     seed: int = 0,
@@ -208,7 +209,8 @@ def find_object(
 
     Args:
         c2w ``(N, 4, 4)`` OpenCV camera-to-world; K ``(N, 3, 3)`` pinhole; sizes ``(N, 2)`` (width, height);
-        points ``(M, 3)`` sparse points (reliable ones: tracks of 3+ photos); masks: ``N`` ``(H, W)`` bool.
+        points ``(M, 3)`` sparse points (reliable ones: tracks of 3+ photos); masks: ``N`` ``(H, W)`` bool,
+        at ``mask_scale`` times the photos' size (reduced masks carve as well and take less memory).
     """
     centers, dirs = c2w[:, :3, 3], c2w[:, :3, 2]
     up = camera_up(c2w)
@@ -243,7 +245,9 @@ def find_object(
 
     framing = footprint_radius(center, c2w, K, sizes, window)
     if masks is not None:
-        hull = sphere_from_masks(masks, c2w, K, center, 2.0 * framing, floor=plane)
+        k_masks = K.copy()
+        k_masks[:, :2] *= mask_scale  # pixel (0, 0) is the image corner: every coordinate scales
+        hull = sphere_from_masks(masks, c2w, k_masks, center, 2.0 * framing, floor=plane)
         if hull is not None:
             c, r = hull
             return ObjectSphere(c, r * margin, up, "masks", conv, axes_rms, used, notes)

@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.alignment import Similarity, compare_poses, fit_similarity, mean_rotation, rotation_angle_deg
+from pipeline.alignment import (
+    Similarity,
+    compare_poses,
+    fit_similarity,
+    mean_rotation,
+    rotation_angle_deg,
+)
 from pipeline.cameras import look_at
 
 

@@ -16,7 +16,12 @@ from pipeline.cameras import CameraSet, load_cameras, save_cameras
 from pipeline.config import ConfigError, PosesConfig, load_config
 from pipeline.errors import InputError
 from pipeline.sfm import required_registered, sequential_pairs
-from pipeline.transforms import load_transforms, opengl_from_opencv, save_transforms, to_transforms
+from pipeline.transforms import (
+    load_transforms,
+    opengl_from_opencv,
+    save_transforms,
+    to_transforms,
+)
 
 FOUNTAIN = Path(__file__).resolve().parents[1] / ".." / "shared" / "testdata" / "sfm" / "fountain-P11"
 CONFIG = PosesConfig(num_threads=2)

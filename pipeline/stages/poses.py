@@ -125,7 +125,7 @@ def run_poses(
         raise InputError(f"only {len(names)} decoded photo(s); poses need at least 2", decode_dir,
                          fix="add photos to the capture and rerun decode")
     known_file = _known_cameras_file(capture_dir, config)
-    masks = _load_masks(masks_dir, capture_dir, names, (width, height), config)
+    mask_files = _mask_files(masks_dir, capture_dir, names, config)
     calibration = _calibration(capture_dir, width, height)
     inputs: dict[str, Path] = {"decode.json": decode_dir / "decode.json"}
     for key, path in (("known_cameras", known_file), ("calibration", calibration[2] if calibration else None)):
@@ -144,15 +144,14 @@ def run_poses(
             if duplicates:
                 log.warning("near-identical photos (the camera did not move between them): %s",
                             "; ".join(", ".join(g) for g in duplicates))
-            posed = _posed_from_sfm(decoded, names, calibration, masks, tmp, config, photo_dir)
+            posed = _posed_from_sfm(decoded, names, calibration, mask_files, tmp, config, photo_dir)
             source = "sfm"
             if duplicates:
                 posed.stats["duplicates"] = duplicates
 
         undistort = _undistortion(posed, config)
         if undistort:
-            _write_undistorted(decoded, posed, undistort, tmp / UNDISTORTED, masks)
-            masks = _undistort_masks(masks, posed, undistort) if masks else masks
+            _write_undistorted(decoded, posed, undistort, tmp / UNDISTORTED)
             image_of = {n: f"{UNDISTORTED}/linear/{n}.exr" for n in posed.names}
         else:
             rel = os.path.relpath(decode_dir.resolve(), out_dir.resolve())
@@ -162,9 +161,9 @@ def run_poses(
 
         K = np.stack([_pinhole(c) for c in posed.lens])
         sizes = np.array([[c.width, c.height] for c in posed.lens], float)
+        hull, mask_scale = _hull_masks(mask_files, posed, undistort, (width, height)) if mask_files else (None, 1.0)
         sphere = find_object(
-            posed.c2w, K, sizes, points=posed.points,
-            masks=[masks[n] for n in posed.names] if masks else None,
+            posed.c2w, K, sizes, points=posed.points, masks=hull, mask_scale=mask_scale,
             window=config.object_window, margin=config.radius_margin, seed=config.seed,
         )
         to_source = normalizing_similarity(sphere, posed.c2w)
@@ -205,11 +204,10 @@ def _known_cameras_file(capture_dir: Path, config: PosesConfig) -> Path | None:
     return found[0]
 
 
-def _load_masks(masks_dir: Path | None, capture_dir: Path, names: list[str], size: tuple[int, int],
-                config: PosesConfig) -> dict[str, np.ndarray] | None:
-    """Object masks (True = object) at the decoded size, or None when there are none or they are not wanted."""
-    from ..imageio import read_image
-
+def _mask_files(masks_dir: Path | None, capture_dir: Path, names: list[str],
+                config: PosesConfig) -> dict[str, Path] | None:
+    """Object mask files per photo, or None when there are none or they are not wanted. Masks are read one
+    at a time where needed (200 full-size masks would not fit in memory together)."""
     if masks_dir is None:
         if not config.use_masks or not (capture_dir / "masks").is_dir():
             return None
@@ -221,17 +219,40 @@ def _load_masks(masks_dir: Path | None, capture_dir: Path, names: list[str], siz
         log.warning("%s: no mask for %d of %d photos (%s); masks are not used", masks_dir, len(missing), len(names),
                     ", ".join(missing[:10]))
         return None
+    log.info("object masks from %s: features on the object are ignored", masks_dir)
+    return {n: masks_dir / f"{n}.png" for n in names}
+
+
+def _read_mask(path: Path, size: tuple[int, int]) -> np.ndarray:
+    """``(H, W)`` bool, True on the object, at ``size`` (width, height)."""
     import cv2
 
-    out = {}
-    for n in names:
-        m = read_image(masks_dir / f"{n}.png")
-        m = m[..., 0] if m.ndim == 3 else m
-        if m.shape != (size[1], size[0]):
-            m = cv2.resize(m, size, interpolation=cv2.INTER_NEAREST)
-        out[n] = m > (np.iinfo(m.dtype).max / 2 if m.dtype.kind == "u" else 0.5)
-    log.info("object masks from %s: features on the object are ignored", masks_dir)
-    return out
+    from ..imageio import read_image
+
+    m = read_image(path)
+    m = m[..., 0] if m.ndim == 3 else m
+    if m.shape != (size[1], size[0]):
+        m = cv2.resize(m, size, interpolation=cv2.INTER_NEAREST)
+    return m > (np.iinfo(m.dtype).max / 2 if m.dtype.kind == "u" else 0.5)
+
+
+def _hull_masks(files: dict[str, Path], posed: Posed, und: UndistortMaps | None, size: tuple[int, int],
+                max_side: int = 640) -> tuple[list[np.ndarray], float]:
+    """The posed photos' masks for the visual hull (undistorted like the images), reduced so the longest side is
+    at most ``max_side``; returns them and the scale factor for the intrinsics."""
+    import cv2
+
+    scale = min(1.0, max_side / max(size))
+    small = (max(1, round(size[0] * scale)), max(1, round(size[1] * scale)))
+    out = []
+    for n in posed.names:
+        m = _read_mask(files[n], size).astype(np.uint8)
+        if und is not None:
+            m = _remap(m, und.maps[und.lens_of[n]], nearest=True)
+        if scale < 1.0:
+            m = cv2.resize(m * np.uint8(255), small, interpolation=cv2.INTER_AREA) > 127
+        out.append(m > 0)
+    return out, small[0] / size[0]
 
 
 def _calibration(capture_dir: Path, width: int, height: int) -> tuple[str, list[float], Path] | None:
@@ -294,7 +315,7 @@ def _model_params(model: str, f: float, width: int, height: int) -> tuple[float,
 
 
 def _posed_from_sfm(decoded: DecodeArtifacts, names: list[str], calibration: tuple[str, list[float], Path] | None,
-                    masks: dict[str, np.ndarray] | None, tmp: Path, config: PosesConfig, photo_dir: Path) -> Posed:
+                    mask_files: dict[str, Path] | None, tmp: Path, config: PosesConfig, photo_dir: Path) -> Posed:
     from ..log import progress
     from ..sfm import run_sfm, stem_of
 
@@ -302,7 +323,8 @@ def _posed_from_sfm(decoded: DecodeArtifacts, names: list[str], calibration: tup
     groups = camera_groups(decoded, names, width, height, config, calibration)
     work = tmp / "work"
     work.mkdir()
-    feature_masks = _write_feature_masks(masks, work / "feature_masks", config) if masks else None
+    feature_masks = (_write_feature_masks(mask_files, (width, height), work / "feature_masks", config)
+                     if mask_files else None)
     with progress() as bar:
         sfm = run_sfm(decoded.folder / "srgb", groups, work, config, feature_masks=feature_masks, progress=bar,
                       folder=photo_dir)
@@ -478,8 +500,7 @@ def _remap(img: np.ndarray, maps: tuple[np.ndarray, np.ndarray], nearest: bool =
     return cv2.remap(img, maps[0], maps[1], interp, borderMode=cv2.BORDER_CONSTANT, borderValue=border)
 
 
-def _write_undistorted(decoded: DecodeArtifacts, posed: Posed, und: UndistortMaps, folder: Path,
-                       masks: dict[str, np.ndarray] | None) -> None:
+def _write_undistorted(decoded: DecodeArtifacts, posed: Posed, und: UndistortMaps, folder: Path) -> None:
     """The decoded images resampled to pinhole, in the decode stage's layout (``decode.json`` included)."""
     from .. import imageio
     from ..artifacts import write_json
@@ -508,11 +529,7 @@ def _write_undistorted(decoded: DecodeArtifacts, posed: Posed, und: UndistortMap
     write_json(folder / "decode.json", meta)
 
 
-def _undistort_masks(masks: dict[str, np.ndarray], posed: Posed, und: UndistortMaps) -> dict[str, np.ndarray]:
-    return {n: _remap(masks[n].astype(np.uint8), und.maps[und.lens_of[n]], nearest=True) > 0 for n in posed.names}
-
-
-def _write_feature_masks(masks: dict[str, np.ndarray], folder: Path, config: PosesConfig) -> Path:
+def _write_feature_masks(files: dict[str, Path], size: tuple[int, int], folder: Path, config: PosesConfig) -> Path:
     """COLMAP's feature masks (``<image>.png.png``, 0 = no features there): the object, grown a little."""
     import cv2
 
@@ -522,8 +539,8 @@ def _write_feature_masks(masks: dict[str, np.ndarray], folder: Path, config: Pos
     folder.mkdir(parents=True)
     r = config.mask_dilate_px
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)) if r else None
-    for n, m in masks.items():
-        obj = m.astype(np.uint8)
+    for n, path in files.items():
+        obj = _read_mask(path, size).astype(np.uint8)
         if kernel is not None:
             obj = cv2.dilate(obj, kernel)
         imageio.write_png(folder / f"{colmap_name(n)}.png", np.where(obj > 0, 0, 255).astype(np.uint8))
