@@ -36,6 +36,7 @@ class ImageSet:
         self._object_idx = self.masks.reshape(-1).nonzero().squeeze(-1)
         if self._object_idx.numel() == 0:
             raise ValueError("every mask is empty: there is no object to train on")
+        self._background_idx = (~self.masks).reshape(-1).nonzero().squeeze(-1)
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -48,12 +49,25 @@ class ImageSet:
     def sample(self, n_rays: int, object_fraction: float, generator: torch.Generator | None = None) -> Batch:
         """Random pixels, ``object_fraction`` of them on the object (the rest anywhere), as a :class:`Batch`."""
         n, h, w = self.shape
-        device = self.images.device
         n_obj = int(round(n_rays * object_fraction))
-        pick = torch.randint(0, self._object_idx.numel(), (n_obj,), generator=generator, device="cpu").to(device)
-        flat_obj = self._object_idx[pick]
-        flat_any = torch.randint(0, n * h * w, (n_rays - n_obj,), generator=generator, device="cpu").to(device)
-        flat = torch.cat([flat_obj, flat_any])
+        flat_obj = self._pick(self._object_idx, n_obj, generator)
+        flat_any = torch.randint(0, n * h * w, (n_rays - n_obj,), generator=generator, device="cpu")
+        return self._rays(torch.cat([flat_obj, flat_any.to(self.images.device)]), generator)
+
+    def sample_background(self, n_rays: int, generator: torch.Generator | None = None) -> Batch | None:
+        """Random pixels off the object (direct views of the surroundings); None if there are none."""
+        if self._background_idx.numel() == 0:
+            return None
+        return self._rays(self._pick(self._background_idx, n_rays, generator), generator)
+
+    def _pick(self, flat_idx: torch.Tensor, count: int, generator: torch.Generator | None) -> torch.Tensor:
+        pick = torch.randint(0, flat_idx.numel(), (count,), generator=generator, device="cpu")
+        return flat_idx[pick.to(flat_idx.device)]
+
+    def _rays(self, flat: torch.Tensor, generator: torch.Generator | None) -> Batch:
+        """Flat pixel indices ``(R,)`` into the image stack -> a :class:`Batch`."""
+        n, h, w = self.shape
+        device = self.images.device
         img, rem = flat // (h * w), flat % (h * w)
         row, col = rem // w, rem % w
         # a random point inside each pixel (anti-aliasing); pixel (row, col) spans [col, col+1) x [row, row+1)

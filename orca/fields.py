@@ -130,6 +130,9 @@ class EnvironmentFieldSpec:
     hidden: int = 64
     layers: int = 2
     dir_freqs: int = 2  # view dependence of the environment's radiance (0: none)
+    # The contraction is the identity inside this radius (object radii) and squeezes what lies beyond: the
+    # room's near props keep most of the grid's cells, the far walls still fit.
+    contract_radius: float = 1.0
     color_hidden: int = 64
     density_bias: float = -1.0  # starts mostly empty so early cones see through to the walls
 
@@ -162,7 +165,8 @@ class EnvironmentField(nn.Module):
             density ``(N, S)`` (in world units⁻¹ of the contracted space) and radiance ``(N, S, 3)``.
         """
         n, s, _ = means.shape
-        c_mean, c_var = contract_gaussian(means, variances)
+        r0 = self.spec.contract_radius
+        c_mean, c_var = contract_gaussian(means / r0, variances / r0**2)
         if self.grid is not None:
             unit = (c_mean / _CONTRACTED_RADIUS + 1) * 0.5
             # footprint std in [0, 1] grid units: mean per-axis std of the contracted Gaussian

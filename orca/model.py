@@ -76,11 +76,20 @@ class OrcaModel(nn.Module):
         self, origins: torch.Tensor, dirs: torch.Tensor, radii: torch.Tensor
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """Radiance ``(N, 3)`` and z-free ray depth ``(N,)`` of the environment field alone (object absent),
-        seen by ordinary camera cones from ``origins``."""
+        seen by ordinary camera cones from ``origins``. The object's inside is empty (see ``solid``)."""
         rgb, depth, _, _ = render_environment_along(
-            self.env_field, origins, dirs, radii, torch.zeros_like(radii), self.spec.render
+            self.env_field, origins, dirs, radii, torch.zeros_like(radii), self.spec.render, self.solid
         )
         return rgb, depth
+
+    @torch.no_grad()
+    def solid(self, x: torch.Tensor) -> torch.Tensor:
+        """``(P, 3)`` -> ``(P,)`` bool: inside the object (SDF < 0; only the bounding sphere is checked)."""
+        inside = torch.zeros(x.shape[0], dtype=torch.bool, device=x.device)
+        near = (x.norm(dim=-1) < self.spec.render.object_radius).nonzero().squeeze(-1)
+        if near.numel():
+            inside[near] = self.sdf_field.sdf(x[near]) < 0
+        return inside
 
 
 @dataclass(frozen=True)
@@ -112,9 +121,13 @@ _OPACITY_EPS = 1e-6
 
 
 def objective(
-    model: OrcaModel, batch: Batch, weights: LossWeights, phase: Phase
+    model: OrcaModel, batch: Batch, weights: LossWeights, phase: Phase, background: Batch | None = None
 ) -> tuple[torch.Tensor, dict[str, torch.Tensor], RayOutputs]:
     """Weighted loss of a batch; ``phase="mask"`` trains geometry from silhouettes only (warm-up).
+
+    The background term (environment field vs. the batch's off-object pixels, plus the optional
+    ``background`` batch of off-object pixels) runs in both phases: it does not touch the object, and
+    off-object rays are cheap (no SDF), so the room can be learned from more of them than object rays.
 
     Returns:
         total loss, the unweighted terms (detached, for logging), and the render.
@@ -135,10 +148,14 @@ def objective(
         terms["distortion"] = cone_distortion_loss(out.env_weights, out.env_s)
         if weights.smoothness > 0:
             terms["smoothness"] = smoothness_term(model, batch, out, weights.smoothness_step)
-        if weights.background > 0 and (~obj).any():
-            bg = ~obj
-            env_rgb, _ = model.environment(batch.origins[bg], batch.dirs[bg], batch.radii[bg])
-            terms["background"] = photometric_loss(env_rgb, batch.rgb[bg], batch.valid[bg], ~batch.valid[bg])
+    if weights.background > 0:
+        rays = [tuple(t[~obj] for t in (batch.origins, batch.dirs, batch.radii, batch.rgb, batch.valid))]
+        if background is not None:
+            rays.append((background.origins, background.dirs, background.radii, background.rgb, background.valid))
+        origins, dirs, radii, rgb, valid = (torch.cat(parts) for parts in zip(*rays))
+        if origins.shape[0]:
+            env_rgb, _ = model.environment(origins, dirs, radii)
+            terms["background"] = photometric_loss(env_rgb, rgb, valid, ~valid)
     total = sum(getattr(weights, k) * v for k, v in terms.items())
     return total, {k: v.detach() for k, v in terms.items()}, out
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from collections.abc import Callable
 from typing import NamedTuple
 
 import torch
@@ -94,11 +95,18 @@ def normalized_distance(u: torch.Tensor, spec: RenderSpec) -> torch.Tensor:
     return torch.where(u > 0, s.clamp(0, 1), torch.zeros_like(s))
 
 
-def _frustums(env: EnvironmentField, apex, axis, radius_growth, t_start, u):
-    """Density and radiance of the frustums between edges ``u`` ``(M, E + 1)`` past ``t_start``."""
+Solid = Callable[[torch.Tensor], torch.Tensor]  # (P, 3) points -> (P,) bool: inside the object
+
+
+def _frustums(env: EnvironmentField, apex, axis, radius_growth, t_start, u, solid: Solid | None = None):
+    """Density and radiance of the frustums between edges ``u`` ``(M, E + 1)`` past ``t_start``; no density
+    where ``solid`` says a frustum's mean lies inside the object."""
     t = t_start[:, None] + u
     means, variances = conical_frustum_gaussian(apex, axis, radius_growth, t[:, :-1], t[:, 1:])
-    return env(means, variances, axis)
+    density, radiance = env(means, variances, axis)
+    if solid is not None:
+        density = torch.where(solid(means.reshape(-1, 3)).reshape(density.shape), 0.0, density)
+    return density, radiance
 
 
 def render_environment_along(
@@ -108,10 +116,14 @@ def render_environment_along(
     radius_growth: torch.Tensor,
     t_start: torch.Tensor,
     spec: RenderSpec,
+    solid: Solid | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """Volume-render the environment field along cones that start ``t_start`` from their apex.
 
     Used for virtual cones (apex behind the surface) and for ordinary camera cones (``t_start = 0``).
+    ``solid`` (optional) marks points inside the object, where the environment has no density: a camera
+    inside the object (the paper's environment views) otherwise looks through whatever the field holds
+    there, which no photo ever constrained.
 
     Coarse-to-fine (``spec.env_fine > 0``): a first pass without gradients on the log-spaced edges places
     ``env_fine`` more samples where its weights are (inverse CDF); the second pass renders coarse and fine
@@ -134,11 +146,11 @@ def render_environment_along(
         return rgb, depth, torch.zeros(m, e, dtype=apex.dtype, device=apex.device), s
     if spec.env_fine > 0:
         with torch.no_grad():
-            density, _ = _frustums(env, apex, axis, radius_growth, t_start, u)
+            density, _ = _frustums(env, apex, axis, radius_growth, t_start, u, solid)
             w_coarse, _ = composite_weights(density, u)
             fine = sample_pdf(u, w_coarse, spec.env_fine, deterministic=spec.deterministic)
         u = torch.sort(torch.cat([u, fine], dim=-1), dim=-1).values
-    density, radiance = _frustums(env, apex, axis, radius_growth, t_start, u)
+    density, radiance = _frustums(env, apex, axis, radius_growth, t_start, u, solid)
     w, _ = composite_weights(density, u)
     rgb = (w[..., None] * radiance).sum(-2)
     depth = (w * 0.5 * (u[:, 1:] + u[:, :-1])).sum(-1)

@@ -151,6 +151,9 @@ class TrainConfig(StrictModel):
     lr_final_ratio: float = Field(0.05, gt=0, le=1, description="exponential decay to lr x ratio at the end")
     grad_clip: float = Field(1.0, gt=0)
     object_fraction: float = Field(0.5, ge=0, le=1, description="share of rays drawn from object pixels")
+    background_rays: int = Field(
+        0, ge=0, description="extra off-object rays per iteration for the environment field (cheap: no SDF)"
+    )
     checkpoint_every: int = Field(500, ge=1)
     preview_every: int = Field(1000, ge=1)
     preview_downscale: int = Field(4, ge=1)
@@ -177,6 +180,12 @@ class TrainConfig(StrictModel):
     env_hidden: int = Field(64, ge=8)
     env_layers: int = Field(2, ge=1)
     env_grid_log2_table: int = Field(17, ge=8, le=24)
+    env_view_freqs: int = Field(
+        2, ge=0, le=8, description="frequencies of the view direction in the environment's radiance (0: none)"
+    )
+    env_contract_radius: float = Field(
+        1.0, gt=0, description="the environment's contraction is the identity inside this radius (object radii)"
+    )
     env_density_bias: float = Field(
         -1.0, description="added to the environment field's density before softplus: how empty it starts"
     )
@@ -189,6 +198,8 @@ class TrainConfig(StrictModel):
     )
     env_samples: int = Field(48, ge=4, description="coarse samples along each virtual cone (log-spaced)")
     env_fine: int = Field(32, ge=0, description="more samples from the coarse pass's weights (0: one pass)")
+    env_near: float = Field(1e-2, gt=0, description="first environment sample past a cone's start (object radii)")
+    env_far: float = Field(1e3, gt=0, description="last environment sample (object radii; the contraction keeps it finite)")
     cone_samples: int = Field(2, ge=1, description="top-weight primary samples that cast virtual cones")
     cone_method: Literal["closed_form", "bounding_rays", "naive"] = "closed_form"
     ior: float = Field(1.5, gt=1, description="index of refraction of the glossy coating (Fresnel)")

@@ -36,7 +36,8 @@ def _batch(n=128, seed=0, radius=0.55) -> Batch:
 def test_objective_terms_by_phase():
     model = _model()
     total, terms, _ = objective(model, _batch(), LossWeights(), "mask")
-    assert set(terms) == {"mask", "eikonal"} and torch.isfinite(total)
+    # the warm-up already teaches the environment field the background (it does not touch the object)
+    assert set(terms) == {"mask", "eikonal", "background"} and torch.isfinite(total)
     total, terms, _ = objective(model, _batch(), LossWeights(), "joint")
     assert {"photometric", "orientation", "distortion", "background"} <= set(terms)
     assert all(torch.isfinite(v) for v in terms.values())
@@ -90,3 +91,20 @@ def test_schedule_opens_sdf_levels_coarse_to_fine_and_caps_beta():
         model.log_beta.fill_(-9.0)  # learned sharper than the cap: left alone
     model.apply_schedule(0.3)
     assert model.beta.item() < cap
+
+
+def test_background_batch_trains_only_the_environment_field():
+    """Extra off-object rays add to the background term; their gradient reaches the environment field,
+    never the SDF (the object's inside is masked without a graph)."""
+    model = _model()
+    batch = _batch(seed=1)
+    extra = _batch(n=64, seed=2)
+    extra = extra._replace(rgb=torch.full_like(extra.rgb, 5.0))  # far from what the field predicts
+    weights = LossWeights(mask=0.0, eikonal=0.0)
+    _, plain, _ = objective(model, batch, weights, "mask")
+    total, more, _ = objective(model, batch, weights, "mask", background=extra)
+    assert more["background"] > plain["background"] + 1.0
+    total.backward()
+    env_grad = sum(p.grad.abs().sum() for p in model.env_field.parameters() if p.grad is not None)
+    sdf_grad = sum(p.grad.abs().sum() for p in model.sdf_field.parameters() if p.grad is not None)
+    assert env_grad > 0 and sdf_grad == 0

@@ -129,11 +129,12 @@ def model_spec(cfg: TrainConfig):
             hash_grid=HashGridSpec(levels=12, log2_table_size=cfg.env_grid_log2_table, base_resolution=16,
                                    max_resolution=1024),
             hidden=cfg.env_hidden, layers=cfg.env_layers, density_bias=cfg.env_density_bias,
+            dir_freqs=cfg.env_view_freqs, contract_radius=cfg.env_contract_radius,
         ),
         render=RenderSpec(
             object_radius=cfg.scene_radius, n_coarse=cfg.n_coarse, n_fine=cfg.n_fine, upsample_steps=cfg.upsample_steps,
             band_samples=cfg.band_samples,
-            env_samples=cfg.env_samples, env_fine=cfg.env_fine, cone_samples=cfg.cone_samples, cone_method=cfg.cone_method, ior=cfg.ior,
+            env_samples=cfg.env_samples, env_fine=cfg.env_fine, env_near=cfg.env_near, env_far=cfg.env_far, cone_samples=cfg.cone_samples, cone_method=cfg.cone_method, ior=cfg.ior,
         ),
         beta_init=cfg.beta_init, beta_final=cfg.beta_final, beta_anneal=cfg.beta_anneal,
         sdf_levels_start=cfg.sdf_levels_start, sdf_levels_full=cfg.sdf_levels_full,
@@ -150,7 +151,7 @@ def loss_weights(cfg: TrainConfig):
 _ARCHITECTURE_KEYS = (
     "sdf_encoding", "sdf_hidden", "sdf_layers", "grid_levels", "grid_log2_table", "grid_max_resolution",
     "texture_levels", "texture_log2_table", "texture_max_resolution",
-    "env_encoding", "env_hidden", "env_layers", "env_grid_log2_table", "scene_radius",
+    "env_encoding", "env_hidden", "env_layers", "env_grid_log2_table", "env_view_freqs", "scene_radius",
 )
 
 
@@ -337,7 +338,8 @@ def run_train(
                 phase = "mask" if step < cfg.mask_warmup else "joint"
                 model.apply_schedule(step / cfg.iterations)
                 batch = data.sample(cfg.batch_rays, cfg.object_fraction, generator)
-                total, terms, out = objective(model, batch, weights, phase)
+                background = data.sample_background(cfg.background_rays, generator) if cfg.background_rays else None
+                total, terms, out = objective(model, batch, weights, phase, background)
                 if not torch.isfinite(total):
                     bad = ", ".join(k for k, v in terms.items() if not torch.isfinite(v)) or "total"
                     raise TrainingDiverged(
@@ -357,7 +359,8 @@ def run_train(
                 scheduler.step()
                 step += 1
                 if step % cfg.log_every == 0 or step == stop_at:
-                    obj = batch.mask > 0.5
+                    # clipped highlights are lower bounds, not targets: a PSNR over them is meaningless
+                    obj = (batch.mask > 0.5) & batch.valid
                     mse = ((out.rgb - batch.rgb)[obj].square().mean()).item() if obj.any() else float("nan")
                     psnr = -10 * math.log10(max(mse, 1e-12)) if mse == mse else float("nan")
                     row = {"step": step, "seconds": round(seconds_before + time.time() - t0, 2), "phase": phase,
