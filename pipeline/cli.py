@@ -27,6 +27,7 @@ COMMANDS: list[tuple[str, str]] = [
     ("synth", "pipeline.synth.cli"),
     ("decode", "pipeline.stages.decode"),
     ("poses", "pipeline.stages.poses"),
+    ("masks", "pipeline.stages.masks"),
     ("calibrate", "calibration.cli"),  # also registers `orca board`
     ("train", "pipeline.stages.train"),
     ("mesh", "pipeline.stages.mesh"),

@@ -128,6 +128,61 @@ class PosesConfig(StrictModel):
     keep_database: bool = Field(False, description="keep COLMAP's database.db (features, matches) in the output.")
 
 
+class MasksConfig(StrictModel):
+    """Object masks (``orca masks``; see pipeline/stages/masks.py, the method in pipeline/silhouette.py)."""
+
+    user_masks: Literal["auto", "ignore"] = Field(
+        "auto",
+        description="'auto': masks in CAPTURE/masks (or --user-masks) replace the automatic ones for the views they "
+        "cover (all views, or corrections for a few); 'ignore': always automatic.",
+    )
+    work_size: int = Field(
+        480, ge=64, description="segmentation runs on images reduced to this longest side (masks are written at "
+        "full size, their outline snapped to the photo's edges)"
+    )
+    rounds: int = Field(3, ge=0, description="rounds of visual-hull carving <-> per-view GrabCut")
+    grabcut_iterations: int = Field(4, ge=1, description="GrabCut's own iterations per view and round")
+    hull_resolution: int = Field(128, ge=16, le=512, description="voxels along each side of the unit sphere's cube")
+    carve_votes: int = Field(
+        3, ge=1, description="a voxel leaves the visual hull when this many views see it off the object (1: the "
+        "classic hull, cut by any one mask's mistake; more: robust to a few wrong masks, looser around thin parts)"
+    )
+    seed_radius: float = Field(
+        0.3, ge=0, lt=1, description="before any hull, the central part of the unit sphere's image (this fraction of "
+        "its radius) is taken as object: the cameras converge on it"
+    )
+    neighbours: int = Field(6, ge=1, description="views compared with each view (support-plane test)")
+    neighbour_max_deg: float = Field(60.0, gt=0, le=180, description="...at most this far around the object")
+    consistency_rank: int = Field(
+        3, ge=1, description="a pixel is explained by a surface when this many neighbours agree (occlusion-robust)"
+    )
+    floor: bool = Field(True, description="find the support plane and take the floor around the object as background")
+    floor_threshold: float = Field(
+        0.03, gt=0, lt=1, description="mean absolute sRGB difference (0..1, 5x5 box) under which the plane explains "
+        "a pixel"
+    )
+    sweep: bool = Field(
+        True, description="sweep depths outside the unit sphere: props in front of the object and the room behind it "
+        "that match across views are background"
+    )
+    sweep_neighbours: int = Field(3, ge=1, description="nearest views compared in the depth sweep")
+    sweep_rank: int = Field(2, ge=1, description="how many of them must agree")
+    sweep_threshold: float = Field(0.04, gt=0, lt=1, description="as floor_threshold, for the depth sweep")
+    texture_threshold: float = Field(
+        0.05, ge=0, description="the depth sweep counts only patches with at least this sRGB standard deviation "
+        "(flat patches match at any depth)"
+    )
+    sphere_margin: float = Field(1.05, ge=1, description="the object's refined bounding sphere is enlarged by this")
+    renormalize: bool = Field(
+        True, description="write cameras.json in the frame where the refined sphere is the unit sphere (tight "
+        "training bounds); otherwise a copy of the poses frame"
+    )
+    agreement_warning: float = Field(
+        0.85, ge=0, le=1, description="warn about views whose mask and the hull's reprojection agree less (IoU)"
+    )
+    overlay_size: int = Field(640, ge=64, description="longest side of the QA overlays")
+
+
 class LossConfig(StrictModel):
     """Weights of the training losses (see orca/model.py)."""
 
@@ -272,6 +327,7 @@ class PipelineConfig(StrictModel):
     preset: str = "standard"
     decode: DecodeConfig = Field(default_factory=DecodeConfig)
     poses: PosesConfig = Field(default_factory=PosesConfig)
+    masks: MasksConfig = Field(default_factory=MasksConfig)
     train: TrainConfig = Field(default_factory=TrainConfig)
     mesh: MeshConfig = Field(default_factory=MeshConfig)
     export: ExportConfig = Field(default_factory=ExportConfig)

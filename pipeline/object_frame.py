@@ -143,22 +143,37 @@ def footprint_radius(center: np.ndarray, c2w: np.ndarray, K: np.ndarray, sizes: 
     return float(np.median(dist * np.sin(np.arctan(half))))
 
 
-def _carve(masks: Sequence[np.ndarray], c2w: np.ndarray, K: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-           resolution: int, keep_fraction: float, floor: tuple[np.ndarray, float] | None) -> tuple[np.ndarray, np.ndarray]:
-    """Voxel centres ``(V, 3)`` of the box ``[lo, hi]`` kept by the masks, and the voxel size ``(3,)``."""
-    size = (hi - lo) / resolution
-    axes = [lo[k] + (np.arange(resolution) + 0.5) * size[k] for k in range(3)]
-    grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
-    seen = np.zeros(len(grid), np.int32)
-    hits = np.zeros(len(grid), np.int32)
-    for m, c, k in zip(masks, c2w, K):  # one camera at a time: memory stays O(voxels)
-        uv, z = project(grid, c[None], k[None])
+def mask_votes(masks: Sequence[np.ndarray], c2w: np.ndarray, K: np.ndarray,
+               points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each point, in how many photos it projects inside the image (``seen``) and onto the object (``hits``).
+
+    Args:
+        masks: ``N`` ``(H, W)`` bool (or 0/1), True on the object, in the cameras' pixel grid.
+        c2w ``(N, 4, 4)``; K ``(N, 3, 3)``; points ``(V, 3)``.
+
+    Returns:
+        ``(V,)`` int32 ``seen`` and ``hits``. One camera at a time: memory stays O(points).
+    """
+    seen = np.zeros(len(points), np.int32)
+    hits = np.zeros(len(points), np.int32)
+    for m, c, k in zip(masks, c2w, K):
+        uv, z = project(points, c[None], k[None])
         h, w = m.shape
         x = np.floor(uv[0, :, 0]).astype(np.int64)
         y = np.floor(uv[0, :, 1]).astype(np.int64)
         inside = (z[0] > 0) & (x >= 0) & (x < w) & (y >= 0) & (y < h)
         seen += inside
         hits[inside] += m[y[inside], x[inside]]
+    return seen, hits
+
+
+def _carve(masks: Sequence[np.ndarray], c2w: np.ndarray, K: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+           resolution: int, keep_fraction: float, floor: tuple[np.ndarray, float] | None) -> tuple[np.ndarray, np.ndarray]:
+    """Voxel centres ``(V, 3)`` of the box ``[lo, hi]`` kept by the masks, and the voxel size ``(3,)``."""
+    size = (hi - lo) / resolution
+    axes = [lo[k] + (np.arange(resolution) + 0.5) * size[k] for k in range(3)]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    seen, hits = mask_votes(masks, c2w, K, grid)
     keep = (seen >= 0.5 * len(masks)) & (hits >= keep_fraction * seen)
     if floor is not None:
         keep &= grid @ floor[0] >= floor[1]

@@ -6,6 +6,9 @@
     >>> from pipeline.results import load_poses
     >>> poses = load_poses("results/demo/poses")
     >>> poses.cameras().c2w().shape, poses.report["registered"]
+    >>> from pipeline.results import load_masks
+    >>> masks = load_masks("results/demo/masks")
+    >>> masks.mask("IMG_0001").mean(), masks.report["agreement"]["median"], masks.report["object_sphere"]
 """
 
 from __future__ import annotations
@@ -96,3 +99,39 @@ def load_poses(folder: str | Path) -> PosesArtifacts:
     if not (folder / "cameras.json").is_file():
         raise InputError("not a poses artifact (no cameras.json)", folder, "run `orca poses` on the capture first")
     return PosesArtifacts(folder)
+
+
+@dataclass(frozen=True)
+class MasksArtifacts:
+    """The masks stage's folder: ``masks/<name>.png``, ``cameras.json`` (the object's tight sphere is the unit
+    sphere), ``masks_report.json``, ``overlays/``, ``contact_sheet.jpg``."""
+
+    folder: Path
+
+    @cached_property
+    def report(self) -> dict[str, Any]:
+        return read_json(self.folder / "masks_report.json")
+
+    @property
+    def names(self) -> list[str]:
+        return [v["name"] for v in self.report["views"]]
+
+    def mask(self, name: str) -> np.ndarray:
+        """``(H, W)`` bool, True on the object."""
+        path = self.folder / "masks" / f"{name}.png"
+        if not path.is_file():
+            raise KeyError(f"no mask {name!r} in {self.folder}; known: {', '.join(self.names[:10])}")
+        return read_image(path) > 127
+
+    def cameras(self):
+        """:class:`~pipeline.cameras.CameraSet` re-normalized to the object's tight sphere (see the report)."""
+        from .cameras import load_cameras
+
+        return load_cameras(self.folder / "cameras.json")
+
+
+def load_masks(folder: str | Path) -> MasksArtifacts:
+    folder = Path(folder)
+    if not (folder / "masks_report.json").is_file():
+        raise InputError("not a masks artifact (no masks_report.json)", folder, "run `orca masks` on the capture first")
+    return MasksArtifacts(folder)
