@@ -55,19 +55,11 @@ def capture_config(wildcards):
     return [str(path)] if path.exists() else []
 
 
-def cameras_and_masks(wildcards):
-    """Cameras and masks for training. The masks stage is not built yet, so only a synthetic capture's ground
-    truth can provide them (its cameras too: `orca evaluate` has no frame alignment yet)."""
-    gt = CAPTURES_DIR / wildcards.capture / "ground_truth"
-    if (gt / "cameras.json").is_file() and (gt / "masks").is_dir():
-        return {"cameras": str(gt / "cameras.json"), "masks": str(gt / "masks")}
-    c = wildcards.capture
-    raise ValueError(
-        f"capture {c!r} has no ground_truth/cameras.json and masks/: training a real capture needs object masks, "
-        f"and the masks stage is not built yet. Run the poses stage (snakemake {RESULTS_DIR}/{c}/poses), then "
-        f"`orca train --decode {RESULTS_DIR}/{c}/decode --cameras {RESULTS_DIR}/{c}/poses/cameras.json "
-        "--masks <your masks>` (--decode .../poses/undistorted if the poses stage wrote that folder)."
-    )
+def user_masks(wildcards):
+    """The capture's own masks/ folder (the user's masks, for all or some photos), when it has one: the masks
+    stage uses them instead of its automatic ones, and editing them reruns it."""
+    path = CAPTURES_DIR / wildcards.capture / "masks"
+    return {"user_masks": str(path)} if path.is_dir() else {}
 
 
 def poses_inputs(wildcards):
@@ -88,6 +80,7 @@ def has_ground_truth(capture):
 rule all:
     input:
         expand(RESULTS_DIR / "{capture}" / "poses", capture=CAPTURES),
+        expand(RESULTS_DIR / "{capture}" / "masks", capture=CAPTURES),
         expand(RESULTS_DIR / "{capture}" / "train", capture=CAPTURES),
         expand(RESULTS_DIR / "{capture}" / "mesh", capture=CAPTURES),
         expand(RESULTS_DIR / "{capture}" / "export", capture=CAPTURES),
@@ -124,12 +117,34 @@ rule poses:
         "--set poses.num_threads={threads} {SET} > {log} 2>&1"
 
 
+rule masks:
+    """Posed photos -> object masks (automatic: unit-sphere prior, support plane, depth sweep, GrabCut and the
+    visual hull made to agree; or the user's CAPTURE/masks/ for all or some photos), cameras.json re-normalized
+    to the object's tight bounding sphere, overlays, contact sheet, masks_report.json."""
+    input:
+        unpack(user_masks),
+        decode=RESULTS_DIR / "{capture}" / "decode",
+        poses=RESULTS_DIR / "{capture}" / "poses",
+        capture_yaml=capture_config,
+    output:
+        directory(RESULTS_DIR / "{capture}" / "masks"),
+    log:
+        RESULTS_DIR / "{capture}" / "logs" / "masks.log",
+    shell:
+        "{ORCA} masks {CAPTURES_DIR}/{wildcards.capture} --poses {input.poses} --decode {input.decode} "
+        "--out {output} --preset {PRESET} {SET} > {log} 2>&1"
+
+
 rule train:
-    """Decoded photos + cameras + masks -> the trained model (SDF, diffuse head, environment field).
+    """Decoded photos + cameras + masks -> the trained model (SDF, diffuse head, environment field). The cameras
+    are the masks stage's (the poses stage's, re-normalized so that the object's tight sphere is the unit
+    sphere), for real and synthetic captures alike: evaluation aligns them to the ground truth. When the poses
+    stage resampled the photos to pinhole (poses/undistorted/), training reads those.
     Checkpoints go to train.checkpoints/ beside the output, so a killed job resumes where it stopped."""
     input:
-        unpack(cameras_and_masks),
         decode=RESULTS_DIR / "{capture}" / "decode",
+        poses=RESULTS_DIR / "{capture}" / "poses",
+        masks=RESULTS_DIR / "{capture}" / "masks",
         capture_yaml=capture_config,
     output:
         directory(RESULTS_DIR / "{capture}" / "train"),
@@ -137,7 +152,8 @@ rule train:
         RESULTS_DIR / "{capture}" / "logs" / "train.log",
     threads: workflow.cores
     shell:
-        "{ORCA} train --decode {input.decode} --cameras {input.cameras} --masks {input.masks} "
+        "images={input.decode}; if [ -d {input.poses}/undistorted ]; then images={input.poses}/undistorted; fi; "
+        "{ORCA} train --decode $images --cameras {input.masks}/cameras.json --masks {input.masks}/masks "
         "--capture {CAPTURES_DIR}/{wildcards.capture} --out {output} --preset {PRESET} {SET} > {log} 2>&1"
 
 
@@ -146,13 +162,13 @@ rule mesh:
     cameras record to_colmap), mesh_report.json, mesh.png."""
     input:
         train=RESULTS_DIR / "{capture}" / "train",
-        cameras=lambda wc: cameras_and_masks(wc)["cameras"],
+        masks=RESULTS_DIR / "{capture}" / "masks",
     output:
         directory(RESULTS_DIR / "{capture}" / "mesh"),
     log:
         RESULTS_DIR / "{capture}" / "logs" / "mesh.log",
     shell:
-        "{ORCA} mesh {input.train} --cameras {input.cameras} --out {output} --preset {PRESET} {SET} > {log} 2>&1"
+        "{ORCA} mesh {input.train} --cameras {input.masks}/cameras.json --out {output} --preset {PRESET} {SET} > {log} 2>&1"
 
 
 rule export:
@@ -161,14 +177,14 @@ rule export:
     object renders (combined, diffuse, specular, normals). Rendering uses every core."""
     input:
         train=RESULTS_DIR / "{capture}" / "train",
-        cameras=lambda wc: cameras_and_masks(wc)["cameras"],
+        masks=RESULTS_DIR / "{capture}" / "masks",
     output:
         directory(RESULTS_DIR / "{capture}" / "export"),
     log:
         RESULTS_DIR / "{capture}" / "logs" / "export.log",
     threads: workflow.cores
     shell:
-        "{ORCA} export {input.train} --cameras {input.cameras} --out {output} --preset {PRESET} {SET} > {log} 2>&1"
+        "{ORCA} export {input.train} --cameras {input.masks}/cameras.json --out {output} --preset {PRESET} {SET} > {log} 2>&1"
 
 
 rule evaluate:
@@ -177,7 +193,7 @@ rule evaluate:
     object views at half size keep it minutes on a CPU)."""
     input:
         train=RESULTS_DIR / "{capture}" / "train",
-        cameras=lambda wc: cameras_and_masks(wc)["cameras"],
+        masks=RESULTS_DIR / "{capture}" / "masks",
         mesh=RESULTS_DIR / "{capture}" / "mesh",
         ground_truth=CAPTURES_DIR / "{capture}" / "ground_truth",
     output:
@@ -185,5 +201,5 @@ rule evaluate:
     log:
         RESULTS_DIR / "{capture}" / "logs" / "evaluate.log",
     shell:
-        "{ORCA} evaluate {input.train} --ground-truth {input.ground_truth} --cameras {input.cameras} "
+        "{ORCA} evaluate {input.train} --ground-truth {input.ground_truth} --cameras {input.masks}/cameras.json "
         "--mesh {input.mesh}/mesh.ply --out {output} --views 8 --downscale 2 > {log} 2>&1"
