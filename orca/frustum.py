@@ -32,7 +32,9 @@ def conical_frustum_gaussian(
     """
     mu = 0.5 * (t0 + t1)
     hw = 0.5 * (t1 - t0)
-    denom = 3 * mu.square() + hw.square()
+    # A zero-length frustum at the apex (t0 = t1 = 0: an inverse-CDF sample landing exactly on the first
+    # edge) would divide 0 by 0; its moments are all 0.
+    denom = (3 * mu.square() + hw.square()).clamp_min(torch.finfo(mu.dtype).eps)
     t_mean = mu + 2 * mu * hw.square() / denom
     t_var = hw.square() / 3 - (4 / 15) * hw.pow(4) * (12 * mu.square() - hw.square()) / denom.square()
     r_var = radius_growth[:, None].square() * (

@@ -56,6 +56,19 @@ def test_frustum_gaussian_is_valid_for_signed_intervals_through_the_apex():
     torch.testing.assert_close(var[0, 0], pts.var(0), atol=2e-4, rtol=2e-2)
 
 
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_zero_length_frustum_at_the_apex_is_a_point(dtype):
+    """An inverse-CDF sample exactly on a camera cone's first edge (0) makes the interval [0, 0]: its
+    moments are 0, not 0/0 (a NaN there once crashed a 3000-iteration run in the hash grid's lookup)."""
+    o = torch.tensor([[1.0, 2.0, 3.0]], dtype=dtype)
+    d = torch.tensor([[0.0, 0.6, 0.8]], dtype=dtype)
+    t = torch.tensor([[0.0, 0.0, 0.5]], dtype=dtype)
+    mean, var = conical_frustum_gaussian(o, d, torch.tensor([0.01], dtype=dtype), t[:, :-1], t[:, 1:])
+    assert torch.isfinite(mean).all() and torch.isfinite(var).all()
+    torch.testing.assert_close(mean[0, 0], o[0])
+    torch.testing.assert_close(var[0, 0], torch.zeros(3, dtype=dtype))
+
+
 def test_contract_is_identity_inside_and_bounded_by_two():
     x = torch.tensor([[0.3, 0.2, -0.1], [10.0, 0, 0], [1e6, 1e6, 0]])
     c = contract(x)
