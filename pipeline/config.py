@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from .errors import ConfigError
 
@@ -207,7 +207,7 @@ class TrainConfig(StrictModel):
     grad_clip: float = Field(1.0, gt=0)
     object_fraction: float = Field(0.5, ge=0, le=1, description="share of rays drawn from object pixels")
     background_rays: int = Field(
-        0, ge=0, description="extra off-object rays per iteration for the environment field (cheap: no SDF)"
+        2048, ge=0, description="extra off-object rays per iteration for the environment field (cheap: no SDF)"
     )
     checkpoint_every: int = Field(500, ge=1)
     preview_every: int = Field(1000, ge=1)
@@ -239,10 +239,10 @@ class TrainConfig(StrictModel):
         2, ge=0, le=8, description="frequencies of the view direction in the environment's radiance (0: none)"
     )
     env_contract_radius: float = Field(
-        1.0, gt=0, description="the environment's contraction is the identity inside this radius (object radii)"
+        3.0, gt=0, description="the environment's contraction is the identity inside this radius (object radii)"
     )
     env_density_bias: float = Field(
-        -1.0, description="added to the environment field's density before softplus: how empty it starts"
+        -3.0, description="added to the environment field's density before softplus: how empty it starts"
     )
     # rendering
     n_coarse: int = Field(48, ge=4)
@@ -253,8 +253,8 @@ class TrainConfig(StrictModel):
     )
     env_samples: int = Field(48, ge=4, description="coarse samples along each virtual cone (log-spaced)")
     env_fine: int = Field(32, ge=0, description="more samples from the coarse pass's weights (0: one pass)")
-    env_near: float = Field(1e-2, gt=0, description="first environment sample past a cone's start (object radii)")
-    env_far: float = Field(1e3, gt=0, description="last environment sample (object radii; the contraction keeps it finite)")
+    env_near: float = Field(0.05, gt=0, description="first environment sample past a cone's start (object radii)")
+    env_far: float = Field(100.0, gt=0, description="last environment sample (object radii; the contraction keeps it finite)")
     cone_samples: int = Field(2, ge=1, description="top-weight primary samples that cast virtual cones")
     cone_method: Literal["closed_form", "bounding_rays", "naive"] = "closed_form"
     ior: float = Field(1.5, gt=1, description="index of refraction of the glossy coating (Fresnel)")
@@ -264,6 +264,12 @@ class TrainConfig(StrictModel):
     sdf_levels_start: int = Field(4, ge=1, description="coarse-to-fine: SDF hash-grid levels active at the start")
     sdf_levels_full: float = Field(0.3, ge=0, le=1, description="fraction of training after which all levels are active")
     losses: LossConfig = Field(default_factory=LossConfig)
+
+    @model_validator(mode="after")
+    def _environment_range(self) -> TrainConfig:
+        if self.env_far <= self.env_near:
+            raise ValueError(f"env_far ({self.env_far}) must exceed env_near ({self.env_near})")
+        return self
 
 
 class MeshConfig(StrictModel):
@@ -342,7 +348,7 @@ PRESETS: dict[str, dict[str, Any]] = {
             "preview_every": 500, "grid_levels": 8, "grid_log2_table": 17, "grid_max_resolution": 128,
             "texture_levels": 8, "texture_log2_table": 17, "texture_max_resolution": 512,
             "env_grid_log2_table": 17, "n_coarse": 24, "n_fine": 8, "upsample_steps": 2, "band_samples": 16,
-            "env_samples": 16, "env_fine": 16,
+            "env_samples": 24, "env_fine": 24, "background_rays": 768,
             "cone_samples": 1,
         },
         "mesh": {"resolution": 128},
@@ -360,6 +366,7 @@ PRESETS: dict[str, dict[str, Any]] = {
             "texture_levels": 0, "losses": {"smoothness": 0.0},
             "env_hidden": 256, "env_layers": 8, "n_coarse": 64, "n_fine": 128, "env_samples": 64, "env_fine": 128,
             "cone_samples": 4, "cone_method": "bounding_rays", "iterations": 200000, "batch_rays": 1024,
+            "background_rays": 0,  # the paper learns the environment from the reflections alone
         },
     },
 }

@@ -142,6 +142,7 @@ def test_config_layers_and_overrides(tmp_path):
         ("decode:\n  downscale: 0\n", "downscale"),
         ("preset: turbo\n", "unknown preset"),
         ("- a\n- b\n", "mapping"),
+        ("train:\n  env_near: 5\n  env_far: 2\n", "env_far"),
     ],
 )
 def test_config_rejects_bad_files_naming_the_problem(tmp_path, text, match):
