@@ -140,13 +140,14 @@ class MasksConfig(StrictModel):
         480, ge=64, description="segmentation runs on images reduced to this longest side (masks are written at "
         "full size, their outline snapped to the photo's edges)"
     )
-    rounds: int = Field(3, ge=0, description="rounds of visual-hull carving <-> per-view GrabCut")
+    rounds: int = Field(3, ge=1, description="rounds of visual-hull carving <-> per-view GrabCut")
     grabcut_iterations: int = Field(4, ge=1, description="GrabCut's own iterations per view and round")
     hull_resolution: int = Field(128, ge=16, le=512, description="voxels along each side of the unit sphere's cube")
-    carve_votes: int = Field(
-        3, ge=1, description="a voxel leaves the visual hull when this many views see it off the object (1: the "
-        "classic hull, cut by any one mask's mistake; more: robust to a few wrong masks, looser around thin parts)"
+    carve_share: float = Field(
+        0.2, ge=0, le=1, description="a voxel leaves the visual hull when this share of the views see it off the "
+        "object (robust to a few wrong masks; a smaller share: tighter around thin parts, less robust)"
     )
+    carve_votes: int = Field(3, ge=1, description="...and at least this many views (1: the classic visual hull)")
     seed_radius: float = Field(
         0.3, ge=0, lt=1, description="before any hull, the central part of the unit sphere's image (this fraction of "
         "its radius) is taken as object: the cameras converge on it"

@@ -16,13 +16,14 @@ Three cues, each cheap and each weak alone, made to agree:
    projected sphere, seeded by what is known: cues 1 and 2 as certain background, the current visual hull's
    reprojection as probable object, its eroded core as object.
 
-They are made to agree by **visual-hull carving**: a voxel of the unit sphere is cut when at least
-``carve_votes`` views see it off the object (a few, not one: a view that misses a piece does not cut it out of
-every other view; not a share of the views either: next to a thin part only the few views looking along it
-can see the gap). The hull, reprojected into every view, seeds the next round
-of GrabCut; a few rounds settle. The final mask of a view is its last GrabCut result inside the (slightly
-dilated) hull reprojection: the hull removes what one view got wrong alone, GrabCut removes what the hull
-cannot see (an occluding prop in front of the object, concavities no silhouette reveals).
+They are made to agree by **visual-hull carving**: a voxel of the unit sphere is cut when ``carve_share`` of
+the views (at least ``carve_votes``) see it off the object: a few, not one, so that a view that misses a piece
+does not cut it out of every other view; not many, because next to a thin part only the few views looking
+along it can see the gap. The hull, reprojected into every view, seeds the next round
+of GrabCut; a few rounds settle. The final mask of a view is the last hull's reprojection -- the views agree on
+it, and it keeps what one view's colours lose (a glossy rim mirroring the background at grazing angles, a dark
+bottom on its dark shadow) -- less that view's certain background and, where a prop in front of the object
+was seen, the pieces GrabCut gave to the prop (the hull knows nothing of occlusion).
 
 Failure cases (documented in the README): an object not standing on a visible textured plane (hanging,
 held, on a textureless table: cue 2 finds nothing and the contact shadow may stay in the masks); an
@@ -88,7 +89,9 @@ class SegmentOptions:
     rounds: int = 3
     grabcut_iterations: int = 4
     hull_resolution: int = 128
-    carve_votes: float = 2.0
+    carve_votes: float = 3.0
+    carve_share: float = 0.2
+    votes_relax: float = 0.0
     floor_visibility: bool = False
     core_erode_px: int = 3
     band_px: int = 4
@@ -106,7 +109,6 @@ class SegmentOptions:
     occluder_reach_px: int = 6
     sweep_far: float = 4.0
     seed_radius: float = 0.3
-    fill_holes: bool = True
 
 
 @dataclass
@@ -117,6 +119,7 @@ class Segmentation:
     colour_masks: list[np.ndarray]  # per view: the last round's GrabCut result
     hull_masks: list[np.ndarray]  # per view: the last visual hull's reprojection
     floor_masks: list[np.ndarray | None]  # per view: pixels explained by the support plane (None: no plane)
+    swept_masks: list[np.ndarray | None]  # per view: pixels a surface outside the sphere explains (None: no sweep)
     plane: Plane | None
     volume: np.ndarray  # (R, R, R) float32 background votes over [-1, 1]^3 (see carve)
     rounds: list[dict[str, float]] = field(default_factory=list)  # per round: agreement of GrabCut and hull
@@ -357,6 +360,11 @@ def carve(masks: Sequence[np.ndarray], views: Sequence[View], points: np.ndarray
     return volume.reshape((resolution,) * 3)
 
 
+def carve_votes(opts: SegmentOptions, views: int) -> float:
+    """Background votes that cut a voxel: ``carve_share`` of the views, at least ``carve_votes``."""
+    return max(opts.carve_votes, round(opts.carve_share * views))
+
+
 def reproject(volume: np.ndarray, view: View, max_votes: float) -> np.ndarray:
     """``(H, W)`` bool: pixels whose ray passes through the hull ``volume < max_votes`` (trilinear, so the
     outline is finer than the voxels), marching in steps of half a voxel through the unit sphere."""
@@ -429,10 +437,11 @@ def first_seeds(sphere: np.ndarray, background: np.ndarray, seed_radius: float,
     seeds = np.full(sphere.shape, cv2.GC_BGD, np.uint8)
     seeds[sphere < 1.0] = cv2.GC_PR_BGD
     seeds[sphere < 0.7] = cv2.GC_PR_FGD
-    seeds[sphere < seed_radius] = cv2.GC_FGD
     if above_floor is not None:
         seeds[above_floor & (sphere < 1.0)] = cv2.GC_PR_FGD
     seeds[background] = cv2.GC_BGD
+    # The centre wins over floor evidence: a dark, flat object bottom matches a dark floor anywhere.
+    seeds[sphere < seed_radius] = cv2.GC_FGD
     return seeds
 
 
@@ -461,48 +470,21 @@ def hull_seeds(hull: np.ndarray, keep_out: np.ndarray | None, background: np.nda
     return seeds
 
 
-def fill_holes(mask: np.ndarray) -> np.ndarray:
-    """``mask`` with its enclosed holes filled (a specular highlight GrabCut gave to the background)."""
-    from scipy.ndimage import binary_fill_holes
+def occluded_region(hull: np.ndarray, colour: np.ndarray, swept: np.ndarray | None) -> np.ndarray:
+    """``(H, W)`` bool: the parts of the hull's reprojection that GrabCut (``colour``) gave to the background
+    and that touch (within 2 px) pixels a surface outside the sphere explains (``swept``): a prop in front of
+    the object, which the hull, knowing nothing of occlusion, covers."""
+    from scipy.ndimage import label
 
-    return binary_fill_holes(mask)
-
-
-def local_contrast(image: np.ndarray, window: int = 5) -> np.ndarray:
-    """``(H, W)`` float32: the standard deviation of the sRGB values (0..1) over a ``window`` box, averaged over
-    the channels. Photo-consistency says nothing about flat patches: they match anywhere nearby."""
-    g = image.astype(np.float32) / 255.0
-    mu = cv2.blur(g, (window, window))
-    return np.sqrt(np.maximum(cv2.blur(g * g, (window, window)) - mu * mu, 0.0)).mean(-1)
-
-
-def occluder_evidence(view: View, others: Sequence[View], opts: SegmentOptions) -> np.ndarray:
-    """``(H, W)`` bool: textured, unclipped pixels of the sphere's image that a surface outside the sphere
-    explains (:func:`outside_cost`): a prop in front of the object, the room behind it."""
-    out = np.zeros(view.shape, bool)
-    found = outside_cost(view, others, opts.occluder_rank, far=opts.sweep_far)
-    if found is None:
+    out = np.zeros(hull.shape, bool)
+    if swept is None or not swept.any():
         return out
-    cost, (x0, y0, x1, y1) = found
-    textured = local_contrast(view.image[y0:y1, x0:x1]) > opts.texture_threshold
-    out[y0:y1, x0:x1] = (cost < opts.occluder_threshold) & textured
-    if view.clipped is not None:  # a highlight's outline can match at a wrong depth; it is never evidence
-        out &= ~(cv2.dilate(view.clipped.astype(np.uint8), _disc(2)) > 0)
-    return out
-
-
-def _floor_from_cost(cost: np.ndarray, outside: np.ndarray, opts: SegmentOptions) -> np.ndarray:
-    """Pixels of the sphere's image the support plane explains; an opening drops isolated specks (chance
-    matches on the object's flat patches)."""
-    floor = ((cost < opts.floor_threshold) & ~outside).astype(np.uint8)
-    return cv2.morphologyEx(floor, cv2.MORPH_OPEN, _disc(1)) > 0
-
-
-def floor_evidence(view: View, others: Sequence[View], plane: Plane, outside: np.ndarray, opts: SegmentOptions,
-                   hidden: Sequence[np.ndarray] | None = None) -> np.ndarray:
-    """``(H, W)`` bool: floor pixels inside the sphere's image (:func:`plane_cost` under the threshold)."""
-    cost = plane_cost(view, others, plane.normal, plane.offset, opts.consistency_rank, hidden=hidden)
-    return _floor_from_cost(cost, outside, opts)
+    candidates = hull & ~colour
+    labels, count = label(candidates)
+    if count == 0:
+        return out
+    touched = np.unique(labels[(cv2.dilate(swept.astype(np.uint8), _disc(2)) > 0) & candidates])
+    return np.isin(labels, touched[touched > 0])
 
 
 def iou(a: np.ndarray, b: np.ndarray) -> float:
@@ -576,7 +558,10 @@ def segment(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.nda
     volume = np.full((opts.hull_resolution,) * 3, OUTSIDE_VOTES, np.float32)
     for r in range(opts.rounds):
         volume = carve(masks, views, points, index, opts.hull_resolution)
-        hulls = [reproject(volume, v, opts.carve_votes - 0.5) for v in views]
+        # Generous early, strict at the end: the first masks (from the sphere prior alone) miss pieces that
+        # later rounds, seeded by a hull that kept them, can find again.
+        votes = carve_votes(opts, n) + opts.votes_relax * (opts.rounds - 1 - r)
+        hulls = [reproject(volume, v, votes - 0.5) for v in views]
         step("carve")
         if plane is not None and opts.floor_visibility:
             # Again, now that the hull tells which neighbours see each floor point: the floor under an overhang
@@ -604,15 +589,13 @@ def segment(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.nda
         log.info("round %d: GrabCut vs hull IoU median %.3f (worst %.3f); masks changed by %.3f IoU", r + 1,
                  rounds[-1]["agreement_median"], rounds[-1]["agreement_min"], 1 - rounds[-1]["change_median"])
         masks = new
-    # The final masks: this view's colour segmentation, limited to the hull (dilated a little: the hull's
-    # trilinear outline is good to about a pixel).
+    # The final masks: the hull's reprojection -- the views agree on it, and it keeps what one view's colours
+    # lose (a glossy rim mirroring the background, a dark bottom on its dark shadow) -- less what this view
+    # knows the hull cannot: certain background (outside the sphere, swept) and, where a prop in front was
+    # seen, the pieces GrabCut gave to that prop.
     final = []
     for i, (m, h) in enumerate(zip(masks, hulls)):
         if i not in fixed:
-            if opts.fill_holes:
-                m = fill_holes(m) & ~backgrounds[i]
-                if floors[i] is not None:
-                    m &= ~(floors[i] & ~h)
-            m = m & (cv2.dilate(h.astype(np.uint8), _disc(1)) > 0)
+            m = h & ~backgrounds[i] & ~occluded_region(h, m, occluded[i])
         final.append(m)
-    return Segmentation(final, masks, hulls, floors, plane, volume, rounds)
+    return Segmentation(final, masks, hulls, floors, occluded, plane, volume, rounds)

@@ -230,7 +230,7 @@ def run_masks(
     from ..log import progress
     from ..object_frame import sphere_from_masks
     from ..results import load_decode
-    from ..silhouette import carve, hull_grid, iou, reproject, segment
+    from ..silhouette import carve, carve_votes, hull_grid, iou, reproject, segment
 
     started = time.time()
     poses_dir, out_dir = Path(poses_dir), Path(out_dir)
@@ -279,7 +279,7 @@ def run_masks(
         hull_task = bar.add_task("hull", total=len(views))
         hulls = []
         for v in views:
-            hulls.append(reproject(votes, v, opts.carve_votes - 0.5))
+            hulls.append(reproject(votes, v, carve_votes(opts, len(views)) - 0.5))
             bar.advance(hull_task)
     agreement = [iou(m, h) for m, h in zip(final, hulls)]
     c2w = np.stack([v.c2w for v in views])
@@ -351,7 +351,7 @@ def _segment_options(config: MasksConfig) -> Any:
 
     return SegmentOptions(
         rounds=config.rounds, grabcut_iterations=config.grabcut_iterations, hull_resolution=config.hull_resolution,
-        carve_votes=config.carve_votes, seed_radius=config.seed_radius, neighbours=config.neighbours,
+        carve_votes=config.carve_votes, carve_share=config.carve_share, seed_radius=config.seed_radius, neighbours=config.neighbours,
         neighbour_max_deg=config.neighbour_max_deg, consistency_rank=config.consistency_rank, floor=config.floor,
         floor_threshold=config.floor_threshold, occluders=config.sweep, occluder_neighbours=config.sweep_neighbours,
         occluder_rank=config.sweep_rank, occluder_threshold=config.sweep_threshold,
