@@ -470,6 +470,43 @@ def hull_seeds(hull: np.ndarray, keep_out: np.ndarray | None, background: np.nda
     return seeds
 
 
+def local_contrast(image: np.ndarray, window: int = 5) -> np.ndarray:
+    """``(H, W)`` float32: the standard deviation of the sRGB values (0..1) over a ``window`` box, averaged over
+    the channels. Photo-consistency says nothing about flat patches: they match anywhere nearby."""
+    g = image.astype(np.float32) / 255.0
+    mu = cv2.blur(g, (window, window))
+    return np.sqrt(np.maximum(cv2.blur(g * g, (window, window)) - mu * mu, 0.0)).mean(-1)
+
+
+def occluder_evidence(view: View, others: Sequence[View], opts: SegmentOptions) -> np.ndarray:
+    """``(H, W)`` bool: textured, unclipped pixels of the sphere's image that a surface outside the sphere
+    explains (:func:`outside_cost`): a prop in front of the object, the room behind it."""
+    out = np.zeros(view.shape, bool)
+    found = outside_cost(view, others, opts.occluder_rank, far=opts.sweep_far)
+    if found is None:
+        return out
+    cost, (x0, y0, x1, y1) = found
+    textured = local_contrast(view.image[y0:y1, x0:x1]) > opts.texture_threshold
+    out[y0:y1, x0:x1] = (cost < opts.occluder_threshold) & textured
+    if view.clipped is not None:  # a highlight's outline can match at a wrong depth; it is never evidence
+        out &= ~(cv2.dilate(view.clipped.astype(np.uint8), _disc(2)) > 0)
+    return out
+
+
+def _floor_from_cost(cost: np.ndarray, outside: np.ndarray, opts: SegmentOptions) -> np.ndarray:
+    """Pixels of the sphere's image the support plane explains; an opening drops isolated specks (chance
+    matches on the object's flat patches)."""
+    floor = ((cost < opts.floor_threshold) & ~outside).astype(np.uint8)
+    return cv2.morphologyEx(floor, cv2.MORPH_OPEN, _disc(1)) > 0
+
+
+def floor_evidence(view: View, others: Sequence[View], plane: Plane, outside: np.ndarray, opts: SegmentOptions,
+                   hidden: Sequence[np.ndarray] | None = None) -> np.ndarray:
+    """``(H, W)`` bool: floor pixels inside the sphere's image (:func:`plane_cost` under the threshold)."""
+    cost = plane_cost(view, others, plane.normal, plane.offset, opts.consistency_rank, hidden=hidden)
+    return _floor_from_cost(cost, outside, opts)
+
+
 def occluded_region(hull: np.ndarray, colour: np.ndarray, swept: np.ndarray | None) -> np.ndarray:
     """``(H, W)`` bool: the parts of the hull's reprojection that GrabCut (``colour``) gave to the background
     and that touch (within 2 px) pixels a surface outside the sphere explains (``swept``): a prop in front of
@@ -579,7 +616,7 @@ def segment(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.nda
                 if occluded[i] is not None and occluded[i].any():
                     keep_out = cv2.dilate(occluded[i].astype(np.uint8), _disc(opts.occluder_reach_px)) > 0
                 seeds = hull_seeds(hulls[i], keep_out, backgrounds[i], floors[i], opts.core_erode_px, opts.band_px,
-                                   views[i].clipped)
+                                   v.clipped)
                 new.append(grabcut(v.image, seeds, opts.grabcut_iterations))
             step("segment")
         agreement = [iou(a, b) for a, b in zip(new, hulls)]

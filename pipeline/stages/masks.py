@@ -207,7 +207,7 @@ def full_size_mask(mask: np.ndarray, photo: np.ndarray) -> np.ndarray:
     if mask.shape == (H, W):
         return mask
     soft = cv2.resize(mask.astype(np.float32), (W, H), interpolation=cv2.INTER_LINEAR)
-    radius = max(1, int(round(W / mask.shape[1])))
+    radius = max(1, round(W / mask.shape[1]))
     snapped = cv2.ximgproc.guidedFilter(photo.astype(np.float32) / 255.0, soft, radius, 1e-3)
     return snapped > 0.5
 
