@@ -93,6 +93,7 @@ class SegmentOptions:
     carve_share: float = 0.2
     votes_relax: float = 0.0
     floor_visibility: bool = False
+    occluder_min_height: float = 0.1
     core_erode_px: int = 3
     band_px: int = 4
     neighbours: int = 6
@@ -360,6 +361,13 @@ def carve(masks: Sequence[np.ndarray], views: Sequence[View], points: np.ndarray
     return volume.reshape((resolution,) * 3)
 
 
+def _heights(plane: Plane, resolution: int) -> np.ndarray:
+    """``(R, R, R)`` height above ``plane`` of the voxel centres of the grid over [-1, 1]^3."""
+    ax = (np.arange(resolution) + 0.5) / resolution * 2.0 - 1.0
+    x, y, z = np.meshgrid(ax, ax, ax, indexing="ij")
+    return (x * plane.normal[0] + y * plane.normal[1] + z * plane.normal[2] - plane.offset).astype(np.float32)
+
+
 def carve_votes(opts: SegmentOptions, views: int) -> float:
     """Background votes that cut a voxel: ``carve_share`` of the views, at least ``carve_votes``."""
     return max(opts.carve_votes, round(opts.carve_share * views))
@@ -601,9 +609,13 @@ def segment(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.nda
         hulls = [reproject(volume, v, votes - 0.5) for v in views]
         step("carve")
         if plane is not None and opts.floor_visibility:
-            # Again, now that the hull tells which neighbours see each floor point: the floor under an overhang
-            # or through a hole is hidden from most neighbours, and they must not vote.
-            grown = [cv2.dilate(h.astype(np.uint8), _disc(2)) > 0 for h in hulls]
+            # Again, now that the hull tells which neighbours see each floor point: the shadowed floor under an
+            # overhang is hidden from most neighbours, and they must not vote against it. Only the hull's part
+            # clearly above the floor hides anything: its skirt down to the floor -- what this is to remove --
+            # would otherwise hide the very floor that carves it.
+            lifted = volume.copy()
+            lifted[~(_heights(plane, lifted.shape[0]) > opts.occluder_min_height)] = OUTSIDE_VOTES
+            grown = [cv2.dilate(reproject(lifted, v, votes - 0.5).astype(np.uint8), _disc(2)) > 0 for v in views]
             floors = [floor_evidence(v, [views[j] for j in nbrs[i]], plane, spheres[i] >= 1.0, opts,
                                      [grown[j] for j in nbrs[i]]) for i, v in enumerate(views)]
         new = []

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from pipeline.artifacts import read_json
-from pipeline.cameras import Camera, CameraSet, look_at
+from pipeline.cameras import look_at
 from pipeline.config import MasksConfig, PosesConfig
 from pipeline.errors import InputError
 from pipeline.imageio import read_image, write_png
@@ -224,6 +224,6 @@ def test_automatic_masks_of_the_sphere_with_two_corrections(sfm_sphere_capture, 
     auto = [s for n, s in scores.items() if n not in result.user]
     print(f"sphere: IoU median {np.median(auto):.3f} worst {min(auto):.3f} in {seconds:.0f} s; {result.agreement}")
     assert result.user == ["IMG_0003", "IMG_0011"] and scores["IMG_0003"] == scores["IMG_0011"] == 1.0
-    assert np.median(auto) >= 0.92 and min(auto) >= 0.85, scores
+    assert np.median(auto) >= 0.93 and min(auto) >= 0.88, scores  # measured: 0.952, 0.925 (88 s)
     # the tight sphere: the true object (radius 1 in the ground truth's frame) nearly fills it
     assert result.sphere_radius < 0.8
