@@ -318,6 +318,8 @@ def run_train(
         log.info("resuming from %s (step %d of %d)", existing[-1], step, cfg.iterations)
     # The sampler is reseeded from the step so a resumed run draws the batches an uninterrupted one would.
     generator = torch.Generator().manual_seed(cfg.seed * 1_000_003 + step)
+    # off-object rays draw from their own stream: the object's batches do not depend on background_rays
+    background_generator = torch.Generator().manual_seed(cfg.seed * 1_000_003 + step + 7_919)
 
     from torch.utils.tensorboard import SummaryWriter
 
@@ -338,7 +340,7 @@ def run_train(
                 phase = "mask" if step < cfg.mask_warmup else "joint"
                 model.apply_schedule(step / cfg.iterations)
                 batch = data.sample(cfg.batch_rays, cfg.object_fraction, generator)
-                background = data.sample_background(cfg.background_rays, generator) if cfg.background_rays else None
+                background = data.sample_background(cfg.background_rays, background_generator) if cfg.background_rays else None
                 total, terms, out = objective(model, batch, weights, phase, background)
                 if not torch.isfinite(total):
                     bad = ", ".join(k for k, v in terms.items() if not torch.isfinite(v)) or "total"
