@@ -11,8 +11,8 @@ direction) and curvature (the cone's apex and spread).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import torch

@@ -8,7 +8,7 @@ import torch
 from orca.encoding import HashGridSpec
 from orca.fields import EnvironmentFieldSpec, SDFFieldSpec
 from orca.model import Batch, LossWeights, ModelSpec, OrcaModel, objective
-from orca.render import RenderSpec
+from orca.render import RenderSpec, render_environment_along
 
 GRID = HashGridSpec(levels=4, log2_table_size=10, base_resolution=4, max_resolution=32)
 
@@ -108,3 +108,23 @@ def test_background_batch_trains_only_the_environment_field():
     env_grad = sum(p.grad.abs().sum() for p in model.env_field.parameters() if p.grad is not None)
     sdf_grad = sum(p.grad.abs().sum() for p in model.sdf_field.parameters() if p.grad is not None)
     assert env_grad > 0 and sdf_grad == 0
+
+
+def test_environment_views_from_inside_the_object_start_at_its_surface():
+    """A camera at the object's centre (the paper's environment views) sees no environment density inside
+    the object: with a field dense everywhere, the rendered depth is where the rays leave the SDF's sphere
+    (radius 0.4), not at the camera."""
+    model = OrcaModel(ModelSpec(
+        sdf=SDFFieldSpec(hash_grid=GRID, init_radius=0.4),
+        env=EnvironmentFieldSpec(hash_grid=GRID, density_bias=6.0),  # ~6 per unit: opaque within ~0.5
+        render=RenderSpec(env_samples=32, env_fine=32, env_near=0.01, env_far=100.0, deterministic=True),
+    ))
+    dirs = torch.nn.functional.normalize(torch.randn(64, 3, generator=torch.Generator().manual_seed(0)), dim=-1)
+    origins, radii = torch.zeros(64, 3), torch.full((64,), 1e-3)
+    with torch.no_grad():
+        _, depth = model.environment(origins, dirs, radii)
+        # the same field without the object's inside emptied is opaque right at the camera
+        _, unmasked, _, _ = render_environment_along(model.env_field, origins, dirs, radii, torch.zeros(64),
+                                                     model.spec.render)
+    assert bool((depth > 0.4).all()), depth.min()
+    assert bool((unmasked < 0.3).all()), unmasked.max()
