@@ -22,6 +22,12 @@ from typing import Any
 MANIFEST = "manifest.json"
 
 
+def stage_dir(capture: str | Path, stage: str, given: str | Path | None = None) -> Path:
+    """A stage's folder: ``given`` when set, else ``results/<capture folder name>/<stage>`` (the CLI default,
+    the Snakefile's layout)."""
+    return Path(given) if given is not None else Path("results") / Path(capture).resolve().name / stage
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary file path beside ``path``; rename it onto ``path`` only if the block succeeds."""

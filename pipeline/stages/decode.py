@@ -42,6 +42,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ..artifacts import stage_dir
 from ..config import DecodeConfig, add_config_arguments, config_from_arguments
 from ..errors import InputError
 
@@ -442,5 +443,4 @@ def register(subparsers: Any) -> None:
 def main(args: argparse.Namespace) -> DecodeResult:
     capture = Path(args.capture)
     config = config_from_arguments(args, "decode", capture / "capture.yaml")
-    out = args.out if args.out is not None else Path("results") / capture.resolve().name / "decode"
-    return run_decode(capture, out, config.decode)
+    return run_decode(capture, stage_dir(capture, "decode", args.out), config.decode)

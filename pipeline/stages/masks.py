@@ -47,6 +47,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..artifacts import stage_dir
 from ..config import MasksConfig, add_config_arguments, config_from_arguments
 from ..errors import InputError
 
@@ -557,8 +558,6 @@ def register(subparsers: Any) -> None:
 def main(args: argparse.Namespace) -> MasksResult:
     capture = Path(args.capture)
     config = config_from_arguments(args, "masks", capture / "capture.yaml")
-    results = Path("results") / capture.resolve().name
-    poses = args.poses if args.poses is not None else results / "poses"
-    decode = args.decode if args.decode is not None else results / "decode"
-    out = args.out if args.out is not None else results / "masks"
-    return run_masks(capture, poses, out, config.masks, decode_dir=decode, user_masks_dir=args.user_masks)
+    poses, out = stage_dir(capture, "poses", args.poses), stage_dir(capture, "masks", args.out)
+    return run_masks(capture, poses, out, config.masks, decode_dir=stage_dir(capture, "decode", args.decode),
+                     user_masks_dir=args.user_masks)

@@ -54,6 +54,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..alignment import Similarity
+from ..artifacts import stage_dir
 from ..cameras import Camera, CameraSet, load_cameras, save_cameras
 from ..config import PosesConfig, add_config_arguments, config_from_arguments
 from ..errors import InputError
@@ -697,7 +698,5 @@ def register(subparsers: Any) -> None:
 def main(args: argparse.Namespace) -> PosesResult:
     capture = Path(args.capture)
     config = config_from_arguments(args, "poses", capture / "capture.yaml")
-    results = Path("results") / capture.resolve().name
-    decode = args.decode if args.decode is not None else results / "decode"
-    out = args.out if args.out is not None else results / "poses"
+    decode, out = stage_dir(capture, "decode", args.decode), stage_dir(capture, "poses", args.out)
     return run_poses(capture, decode, out, config.poses, masks_dir=args.masks)
