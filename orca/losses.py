@@ -12,20 +12,30 @@ from .volume import distortion_loss
 
 
 def photometric_loss(
-    pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor, clipped: torch.Tensor | None = None
+    pred: torch.Tensor,
+    target: torch.Tensor,
+    valid: torch.Tensor,
+    clipped: torch.Tensor | None = None,
+    clipped_excess: float = 0.0,
 ) -> torch.Tensor:
     """Charbonnier-smoothed L1 on linear radiance over valid pixels, and a lower bound on clipped ones.
 
     Linear radiance spans orders of magnitude (highlights); L1 keeps the bright few from dominating. A
-    clipped pixel's true radiance is at least what was recorded, so only a prediction below it is an error:
+    clipped pixel's true radiance is at least what was recorded, so a prediction below it is a full error:
     without this, the brightest highlights (light sources in the reflection) are never learned at all.
+    Above it, ``clipped_excess`` weighs a weak pull back toward the recorded value: the least radiance that
+    explains the photo. Without it nothing bounds a light's brightness, and a light learned several times too
+    bright blooms past its edges, into the pixels around it that the photos' clipped masks also flag
+    (demosaicing spreads a saturated photosite) but that hold nearly their true values.
 
     Args:
         pred, target: ``(N, 3)``; valid: ``(N,)`` bool (fitted); clipped: ``(N,)`` bool (bounded below).
+        clipped_excess: weight of a clipped pixel's error above its recorded value, in [0, 1].
     """
     diff = torch.where(valid[:, None], pred - target, torch.zeros_like(pred))
     if clipped is not None:
-        diff = torch.where(clipped[:, None], (pred - target).clamp(max=0.0), diff)
+        d = pred - target
+        diff = torch.where(clipped[:, None], torch.where(d < 0, d, clipped_excess * d), diff)
         valid = valid | clipped
     if not valid.any():
         return pred.sum() * 0.0

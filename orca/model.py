@@ -100,6 +100,7 @@ class LossWeights:
     orientation: float = 1e-3
     distortion: float = 1e-3
     background: float = 0.5  # background pixels supervise the environment field directly (beyond the paper)
+    clipped_excess: float = 0.1  # clipped pixels: weight of a prediction's excess over the recorded value
     smoothness: float = 0.0  # normals at the surface vs a small random step away (beyond the paper)
     smoothness_step: float = 0.01  # the step's standard deviation, in object radii
 
@@ -143,7 +144,9 @@ def objective(
         # The surface's colour (radiance per unit opacity): otherwise the quickest way to darken a too-bright
         # start is to thin the surface, and the photometric term fights the silhouettes the mask term learns.
         surface_rgb = out.rgb / out.opacity.clamp_min(_OPACITY_EPS)[:, None]
-        terms["photometric"] = photometric_loss(surface_rgb, batch.rgb, obj & batch.valid, obj & ~batch.valid)
+        terms["photometric"] = photometric_loss(
+            surface_rgb, batch.rgb, obj & batch.valid, obj & ~batch.valid, weights.clipped_excess
+        )
         terms["orientation"] = normal_orientation_loss(out.weights, normals, batch.dirs)
         terms["distortion"] = cone_distortion_loss(out.env_weights, out.env_s)
         if weights.smoothness > 0:
@@ -155,7 +158,7 @@ def objective(
         origins, dirs, radii, rgb, valid = (torch.cat(parts) for parts in zip(*rays))
         if origins.shape[0]:
             env_rgb, _ = model.environment(origins, dirs, radii)
-            terms["background"] = photometric_loss(env_rgb, rgb, valid, ~valid)
+            terms["background"] = photometric_loss(env_rgb, rgb, valid, ~valid, weights.clipped_excess)
     total = sum(getattr(weights, k) * v for k, v in terms.items())
     return total, {k: v.detach() for k, v in terms.items()}, out
 

@@ -193,6 +193,10 @@ class LossConfig(StrictModel):
     orientation: float = Field(1e-3, ge=0)
     distortion: float = Field(1e-3, ge=0)
     background: float = Field(0.5, ge=0, description="background pixels supervise the environment field")
+    clipped_excess: float = Field(
+        0.1, ge=0, le=1, description="clipped (saturated) pixels bound the prediction from below; above, this weak "
+        "pull toward the recorded value keeps a light of unrecorded brightness from blooming past its edges"
+    )
     smoothness: float = Field(0.1, ge=0, description="normals at the surface vs a small random step away")
     smoothness_step: float = Field(0.01, gt=0, description="that step's standard deviation (object radii)")
 

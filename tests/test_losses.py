@@ -36,6 +36,22 @@ def test_clipped_pixels_bound_the_prediction_from_below():
     assert photometric_loss(darker, target, valid).item() == pytest.approx(at(exact), abs=1e-6)  # ignored if not passed
 
 
+def test_clipped_excess_pulls_an_unbounded_highlight_back_weakly():
+    target = torch.tensor([[1.0, 1.0, 1.0], [0.2, 0.2, 0.2]])
+    valid = torch.tensor([False, True])
+    clipped = torch.tensor([True, False])
+    at = lambda pred, w: photometric_loss(pred, target, valid, clipped, w).item()  # noqa: E731
+    exact = torch.tensor([[1.0, 1.0, 1.0], [0.2, 0.2, 0.2]])
+    brighter = torch.tensor([[5.0, 5.0, 5.0], [0.2, 0.2, 0.2]])
+    darker = torch.tensor([[0.6, 0.6, 0.6], [0.2, 0.2, 0.2]])
+    # 4 too bright at weight 0.1 costs what 0.4 too dark costs: the lower bound still dominates
+    assert at(brighter, 0.1) == pytest.approx(at(darker, 0.1), abs=1e-3)
+    assert at(brighter, 0.1) > at(exact, 0.1) + 0.1
+    pred = brighter.clone().requires_grad_(True)
+    photometric_loss(pred, target, valid, clipped, 0.1).backward()
+    assert (pred.grad[0] > 0).all()  # the excess is pulled down
+
+
 def test_mask_loss_prefers_matching_opacity():
     mask = torch.tensor([1.0, 0.0, 1.0])
     assert mask_loss(torch.tensor([0.99, 0.01, 0.99]), mask) < mask_loss(torch.tensor([0.5, 0.5, 0.5]), mask)
