@@ -430,7 +430,8 @@ def load_config(
     try:
         return PipelineConfig.model_validate(merged)
     except ValidationError as e:
-        where = ", ".join(str(f) for f in files if f is not None) or "config"
+        sources = [str(f) for f in files if f is not None] + [f"--set {o}" for o in overrides]
+        where = ", ".join(sources) or f"preset {chosen!r}"
         raise ConfigError(f"{where}: invalid configuration:\n{e}") from e
 
 

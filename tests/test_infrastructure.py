@@ -152,6 +152,13 @@ def test_config_rejects_bad_files_naming_the_problem(tmp_path, text, match):
         load_config(f)
 
 
+def test_config_error_from_an_override_names_the_override(tmp_path):
+    f = tmp_path / "capture.yaml"
+    f.write_text("train:\n  ior: 1.9\n")
+    with pytest.raises(ConfigError, match=r"--set train.losses.clipped_excess=2"):
+        load_config(f, overrides=["train.losses.clipped_excess=2"])
+
+
 # --- CLI ----------------------------------------------------------------------------------------------
 
 
