@@ -34,6 +34,7 @@ COMMANDS: list[tuple[str, str]] = [
     ("export", "pipeline.stages.export"),
     ("render", "pipeline.stages.render"),
     ("evaluate", "pipeline.stages.evaluate"),
+    ("report", "pipeline.stages.report"),
 ]
 
 log = logging.getLogger("orca")
