@@ -7,7 +7,8 @@ notebook calls), each writing one folder under results/<capture>/ atomically.
     snakemake --cores 8 --config captures='["mug"]' preset=standard
     snakemake --executor slurm ...                        # a cluster, through an executor plugin
 
-A synthetic capture (one with ground_truth/) is also evaluated against its ground truth.
+A synthetic capture (one with ground_truth/) is also evaluated against its ground truth. Last, every capture
+gets results/<capture>/report/report.html: one self-contained page of every stage's pictures and figures.
 
 Config keys (all optional): captures (list of folder names under captures_dir), captures_dir, results_dir,
 preset (fast | standard | paper), set (a list of config overrides, e.g. '["train.iterations=500"]').
@@ -77,6 +78,16 @@ def has_ground_truth(capture):
     return (CAPTURES_DIR / capture / "ground_truth" / "scene.json").is_file()
 
 
+REPORTED_STAGES = ["decode", "poses", "masks", "train", "mesh", "export"]
+
+
+def report_inputs(wildcards):
+    """Every stage's folder of the capture, evaluate's only when the capture has ground truth: the report shows
+    them all, and is redone when any of them changes."""
+    stages = REPORTED_STAGES + (["evaluate"] if has_ground_truth(wildcards.capture) else [])
+    return {stage: str(RESULTS_DIR / wildcards.capture / stage) for stage in stages}
+
+
 rule all:
     input:
         expand(RESULTS_DIR / "{capture}" / "poses", capture=CAPTURES),
@@ -85,6 +96,7 @@ rule all:
         expand(RESULTS_DIR / "{capture}" / "mesh", capture=CAPTURES),
         expand(RESULTS_DIR / "{capture}" / "export", capture=CAPTURES),
         [RESULTS_DIR / c / "evaluate" for c in CAPTURES if has_ground_truth(c)],
+        expand(RESULTS_DIR / "{capture}" / "report", capture=CAPTURES),
 
 
 rule decode:
@@ -203,3 +215,17 @@ rule evaluate:
     shell:
         "{ORCA} evaluate {input.train} --ground-truth {input.ground_truth} --cameras {input.masks}/cameras.json "
         "--mesh {input.mesh}/mesh.ply --out {output} --views 8 --downscale 2 > {log} 2>&1"
+
+
+rule report:
+    """Every stage's folder -> report/report.html: one self-contained page (pictures embedded, no network) with
+    each stage's figures and pictures, training curves, the environment panorama, and the evaluation when there
+    is one. Cheap: seconds."""
+    input:
+        unpack(report_inputs),
+    output:
+        directory(RESULTS_DIR / "{capture}" / "report"),
+    log:
+        RESULTS_DIR / "{capture}" / "logs" / "report.log",
+    shell:
+        "{ORCA} report {RESULTS_DIR}/{wildcards.capture} --out {output} > {log} 2>&1"

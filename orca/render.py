@@ -23,7 +23,7 @@ from .differential import normalize, normals_and_curvature_fd
 from .fields import EnvironmentField, SDFField
 from .frustum import conical_frustum_gaussian
 from .sampling import ray_sphere_bounds, sample_pdf, surface_band, upsample_to_surface
-from .volume import composite_weights, volsdf_density
+from .volume import composite_weights, median_depth, volsdf_density
 
 
 @dataclass(frozen=True)
@@ -132,7 +132,7 @@ def render_environment_along(
     Args:
         apex, axis: ``(M, 3)``; radius_growth, t_start: ``(M,)``.
     Returns:
-        radiance ``(M, 3)``, depth past the start ``(M,)``, weights ``(M, E)``, normalized edges
+        radiance ``(M, 3)``, median depth past the start ``(M,)`` (:func:`median_depth`), weights ``(M, E)``, normalized edges
         ``(M, E + 1)`` (E = env_samples + env_fine). A directional (2D map) field gives infinite depth and
         zero weights.
     """
@@ -153,8 +153,7 @@ def render_environment_along(
     density, radiance = _frustums(env, apex, axis, radius_growth, t_start, u, solid)
     w, _ = composite_weights(density, u)
     rgb = (w[..., None] * radiance).sum(-2)
-    depth = (w * 0.5 * (u[:, 1:] + u[:, :-1])).sum(-1)
-    return rgb, depth, w, normalized_distance(u, spec)
+    return rgb, median_depth(w, u), w, normalized_distance(u, spec)
 
 
 def shade_specular(

@@ -42,6 +42,29 @@ def composite_weights(density: torch.Tensor, t: torch.Tensor) -> tuple[torch.Ten
     return trans * alpha, torch.exp(-acc[..., -1])
 
 
+def median_depth(weights: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+    """Where a ray's accumulated weight reaches half its total, interpolated inside that interval.
+
+    The expected depth ``Σ w t`` is a poor depth map for a radiance field: a few per cent of weight left in
+    the far, long intervals (a thin start, a wall not quite opaque) moves it by several times the true
+    depth. The median is the surface the ray mostly sees.
+
+    Args:
+        weights: ``(..., S)``; t: ``(..., S + 1)`` increasing edges.
+    Returns:
+        ``(...)`` depths; the last edge where the weights are all zero.
+    """
+    cum = torch.cumsum(weights, dim=-1)
+    half = 0.5 * cum[..., -1:]
+    i = torch.searchsorted(cum.contiguous(), half.contiguous()).clamp(max=weights.shape[-1] - 1)
+    before = (cum.gather(-1, i) - weights.gather(-1, i))
+    w_i = weights.gather(-1, i)
+    frac = ((half - before) / w_i.clamp_min(1e-12)).clamp(0, 1)
+    t0, t1 = t.gather(-1, i), t.gather(-1, i + 1)
+    depth = (t0 + frac * (t1 - t0)).squeeze(-1)
+    return torch.where(cum[..., -1] > 0, depth, t[..., -1])
+
+
 def distortion_loss(weights: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
     """mip-NeRF 360's distortion loss of a step histogram, in O(S) with prefix sums (differentiable).
 

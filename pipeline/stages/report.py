@@ -495,8 +495,10 @@ def training_curves(rows: list[dict[str, Any]]):
     def series(key: str) -> np.ndarray:
         return np.array([r.get(key) if isinstance(r.get(key), int | float) else np.nan for r in rows], np.float64)
 
-    fig = Figure(figsize=(11, 6.5), layout="constrained")
+    fig = Figure(figsize=(11, 6.5))
     axes = fig.subplots(2, 2)
+    fig.subplots_adjust(left=0.07, right=0.93, bottom=0.08, top=0.95, wspace=0.25, hspace=0.35)  # constrained
+    # layout takes seconds with log axes
     joint = next((r["step"] for r in rows if r.get("phase") == "joint"), None)
     positive = lambda v: np.where(v > 0, v, np.nan)  # log axes
     window = len(rows) // 50  # a running mean over 2 % of the rows on top of the noisy per-batch values
