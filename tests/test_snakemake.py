@@ -1,6 +1,6 @@
 """The Snakefile on a tiny synthetic capture: decode -> poses (its known cameras) -> masks (its own masks) ->
-train -> evaluate run for real, a second run does nothing, and a capture of bare photos plans the whole DAG
-(SfM, automatic masks)."""
+train -> mesh -> export -> evaluate -> report run for real, a second run does nothing, a forced export reruns
+only what follows it, and a capture of bare photos plans the whole DAG (SfM, automatic masks, the report)."""
 
 from __future__ import annotations
 
@@ -55,8 +55,21 @@ def test_the_dag_runs_decode_train_evaluate_then_nothing(tiny_capture, tmp_path)
     assert {v["source"] for v in masks["views"]} == {"user"} and (results / "masks" / "masks" / "IMG_0001.png").is_file()
     train_manifest = json.loads((results / "train" / "manifest.json").read_text())
     assert "masks/cameras.json" in json.dumps(train_manifest)  # trained on the masks stage's tight frame
+    # the report comes last, from every stage's folder, evaluate's included (the capture has ground truth)
+    report = json.loads((results / "report" / "manifest.json").read_text())
+    assert report["sections"] == {s: "present" for s in ("decode", "poses", "masks", "train", "mesh", "export",
+                                                         "evaluate")}, report["problems"]
+    page = (results / "report" / "report.html").read_text(encoding="utf-8")
+    assert page.count("<section id=") == 7 and "data:image/png;base64," in page
     again = snakemake(tmp_path)
     assert again.returncode == 0 and "Nothing to be done" in again.stdout + again.stderr
+    # a stage rerun makes the report again (and what depends on it), nothing else
+    plan = snakemake(tmp_path, "-n", "--forcerun", "export")
+    out = plan.stdout + plan.stderr
+    assert plan.returncode == 0, out[-3000:]
+    assert "rule report:" in out or "localrule report:" in out
+    for rule in ("decode", "poses", "masks", "train", "mesh", "evaluate"):
+        assert f"rule {rule}:" not in out, rule
 
 
 def test_a_capture_of_bare_photos_plans_sfm_masks_and_training(tiny_capture, tmp_path):
@@ -67,6 +80,6 @@ def test_a_capture_of_bare_photos_plans_sfm_masks_and_training(tiny_capture, tmp
     plan = snakemake(tmp_path, "-n")
     out = plan.stdout + plan.stderr
     assert plan.returncode == 0, out[-3000:]
-    for rule in ("decode", "poses", "masks", "train", "mesh", "export"):
+    for rule in ("decode", "poses", "masks", "train", "mesh", "export", "report"):
         assert f"rule {rule}:" in out or f"localrule {rule}:" in out, rule
-    assert "evaluate" not in out  # no ground truth: nothing to evaluate against
+    assert "evaluate" not in out  # no ground truth: nothing to evaluate against (nor for the report to wait on)

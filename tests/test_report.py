@@ -1,0 +1,210 @@
+"""The report stage on real stage outputs: the tiny synthetic capture run through decode, poses (its known
+cameras), masks (its own masks), a few training steps, mesh, export and evaluate by the `orca` CLI, then
+`orca report` on the whole results folder, on a partial one, and on folders that are not results."""
+
+from __future__ import annotations
+
+import base64
+import json
+import shutil
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.cli import main
+from pipeline.errors import InputError
+from pipeline.stages.report import STAGES, run_report, text
+
+TINY = [
+    "train.iterations=4", "train.batch_rays=64", "train.mask_warmup=2", "train.n_coarse=8", "train.n_fine=4",
+    "train.upsample_steps=1", "train.band_samples=4", "train.env_samples=6", "train.grid_levels=4",
+    "train.grid_log2_table=10", "train.texture_levels=2", "train.texture_log2_table=10",
+    "train.env_grid_log2_table=10", "train.sdf_hidden=16", "train.env_hidden=16", "train.log_every=1",
+    "train.preview_every=2", "train.device=cpu",
+    "masks.hull_resolution=32", "mesh.resolution=24", "export.view_size=8", "export.panorama_width=16", "export.video_frames=2",
+    "export.video_width=16", "export.video_height=12", "export.object_views=1", "export.object_downscale=4",
+]
+
+
+@pytest.fixture(scope="module")
+def results(tiny_capture, tmp_path_factory) -> Path:
+    """``results/tiny/`` with every stage's folder, made by the stages themselves."""
+    capture = tmp_path_factory.mktemp("report_capture") / "tiny"
+    shutil.copytree(tiny_capture, capture)
+    shutil.copy(capture / "ground_truth" / "cameras.json", capture / "cameras.json")
+    shutil.copytree(capture / "ground_truth" / "masks", capture / "masks")
+    out = tmp_path_factory.mktemp("report_results") / "tiny"
+    sets = [a for s in TINY for a in ("--set", s)]
+    cams = str(out / "masks" / "cameras.json")
+    for argv in (
+        ["decode", str(capture), "--out", str(out / "decode")],
+        ["poses", str(capture), "--decode", str(out / "decode"), "--out", str(out / "poses")],
+        ["masks", str(capture), "--poses", str(out / "poses"), "--decode", str(out / "decode"), "--out",
+         str(out / "masks")],
+        ["train", "--decode", str(out / "decode"), "--cameras", cams, "--masks", str(out / "masks" / "masks"),
+         "--capture", str(capture), "--out", str(out / "train")],
+        ["mesh", str(out / "train"), "--cameras", cams, "--out", str(out / "mesh"), "--device", "cpu"],
+        ["export", str(out / "train"), "--cameras", cams, "--out", str(out / "export"), "--device", "cpu"],
+    ):
+        assert main([*argv, "--preset", "fast", *sets]) == 0, argv[0]
+    assert main(["evaluate", str(out / "train"), "--ground-truth", str(capture / "ground_truth"), "--cameras", cams,
+                 "--mesh", str(out / "mesh" / "mesh.ply"), "--out", str(out / "evaluate"), "--views", "1",
+                 "--downscale", "2", "--device", "cpu"]) == 0
+    return out
+
+
+class Page(HTMLParser):
+    """The parsed page: section ids, image sources, link targets, every tag, the visible text."""
+
+    def __init__(self, document: str):
+        super().__init__(convert_charrefs=True)
+        self.sections: list[str] = []
+        self.images: list[str] = []
+        self.links: list[str] = []
+        self.tags: set[str] = set()
+        self.text: list[str] = []
+        self.open: list[str] = []
+        self.feed(document)
+        self.close()
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        self.tags.add(tag)
+        if tag == "section":
+            self.sections.append(a.get("id"))
+        if tag == "img":
+            self.images.append(a.get("src", ""))
+        if tag == "a" and not a.get("href", "").startswith("#"):
+            self.links.append(a.get("href", ""))
+        if tag not in ("img", "meta", "br"):
+            self.open.append(tag)
+
+    def handle_endtag(self, tag):
+        assert self.open and self.open[-1] == tag, f"</{tag}> closes <{self.open[-1] if self.open else None}>"
+        self.open.pop()
+
+    def handle_data(self, data):
+        self.text.append(data)
+
+    @property
+    def body(self) -> str:
+        return " ".join(" ".join(self.text).split())
+
+
+def _section(document: str, stage: str) -> str:
+    start = document.index(f'<section id="{stage}">')
+    return document[start : document.index("</section>", start)]
+
+
+def _png(src: str) -> np.ndarray:
+    import cv2
+
+    assert src.startswith("data:image/png;base64,"), src[:40]
+    data = base64.b64decode(src.split(",", 1)[1], validate=True)
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    assert image is not None and image.size > 0
+    return image
+
+
+def test_the_report_of_a_whole_results_folder(results, tmp_path):
+    out = tmp_path / "report"
+    assert main(["report", str(results), "--out", str(out)]) == 0
+    document = (out / "report.html").read_text(encoding="utf-8")
+    page = Page(document)
+    assert page.open == [], "every element is closed"
+    assert page.sections == list(STAGES)
+    # self-contained: every picture embedded as a PNG, no script, no stylesheet or anything else fetched
+    assert len(page.images) >= 30
+    for src in page.images:
+        _png(src)
+    assert "script" not in page.tags and "link" not in page.tags and "iframe" not in page.tags
+    assert "http://" not in document and "https://" not in document
+    # videos and the point cloud are linked relative to the page, and the links lead to the files
+    targets = {(out / href).resolve() for href in page.links}
+    for path in ("export/videos/orbit.mp4", "export/videos/flythrough.mp4", "export/environment_points.ply",
+                 "mesh/mesh.ply"):
+        assert (results / path).resolve() in targets, path
+    assert all(t.exists() for t in targets)
+
+    decode = json.loads((results / "decode" / "decode.json").read_text())
+    poses = json.loads((results / "poses" / "poses_report.json").read_text())
+    masks = json.loads((results / "masks" / "masks_report.json").read_text())
+    train = json.loads((results / "train" / "train_report.json").read_text())
+    mesh = json.loads((results / "mesh" / "mesh_report.json").read_text())
+    export = json.loads((results / "export" / "export.json").read_text())
+    evaluation = json.loads((results / "evaluate" / "evaluate.json").read_text())
+    section = {s: Page(_section(document, s)).body for s in STAGES}
+    assert f"photos decoded {len(decode['images'])}" in section["decode"]
+    assert f"{decode['size'][0]} x {decode['size'][1]}" in section["decode"]
+    clipped = max(im["clipped_fraction"] for im in decode["images"])
+    assert f"{100 * clipped:.2f} %" in section["decode"]
+    assert f"registered / total {poses['registered']} / {poses['total']}" in section["poses"]
+    assert f"{text(masks['agreement']['median'], 3)} / {text(masks['agreement']['mean'], 3)}" in section["masks"]
+    for view in masks["views"]:
+        assert view["name"] in section["masks"]
+    for warning in masks["warnings"]:  # the tiny capture's 4-view hull is loose: its views are flagged
+        assert " ".join(warning.split()) in section["masks"]
+    assert f"iterations {train['iterations']}" in section["train"]
+    for term, value in train["final_losses"].items():
+        assert f"{term} {text(value)}" in section["train"]
+    assert "Training curves" in section["train"] and "Preview" in section["train"]
+    assert f"vertices {mesh['vertices']}" in section["mesh"] and f"triangles {mesh['triangles']}" in section["mesh"]
+    assert f"watertight {'yes' if mesh['watertight'] else 'no'}" in section["mesh"]
+    assert f"{export['point_cloud']['points']} points" in section["export"]
+    for name in export["environment_views"]:
+        assert name in section["export"]
+    assert len(Page(_section(document, "export")).images) >= 2 + 2 * len(export["environment_views"]) + 4
+    object_means = evaluation["object"]["mean"]
+    assert f"normal MAE {text(object_means['normal_mae_deg'])} deg" in section["evaluate"]
+    assert f"PSNR specular (sRGB) {text(object_means['psnr_srgb_specular'])} dB" in section["evaluate"]
+    assert f"depth AbsRel {text(evaluation['environment']['mean']['depth_absrel'])}" in section["evaluate"]
+    assert f"Chamfer (object radii) {text(evaluation['mesh']['chamfer_fraction'])}" in section["evaluate"]
+    assert len(Page(_section(document, "evaluate")).images) == 2, "object and environment grids"
+
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["stage"] == "report" and manifest["problems"] == []
+    assert manifest["sections"] == dict.fromkeys(STAGES, "present")
+    assert {"evaluate/evaluate.json", "train/metrics.jsonl", "export/export.json"} <= set(manifest["inputs"])
+
+
+def test_partial_results_say_what_is_missing_and_escape_text(results, tmp_path):
+    partial = tmp_path / "tiny"
+    for stage in ("decode", "masks", "mesh"):
+        shutil.copytree(results / stage, partial / stage)
+    (partial / "mesh" / "mesh_report.json").unlink()  # a stage folder that lacks its report
+    report = json.loads((partial / "masks" / "masks_report.json").read_text())
+    report["warnings"] = ['view <b>IMG_0001</b> & "friends" <script>alert(1)</script>']
+    (partial / "masks" / "masks_report.json").write_text(json.dumps(report))
+
+    summary = run_report(partial)
+    document = (partial / "report" / "report.html").read_text(encoding="utf-8")
+    page = Page(document)
+    assert page.sections == list(STAGES) and page.open == []
+    assert summary["sections"] == {"decode": "present", "poses": "missing", "masks": "present", "train": "missing",
+                                   "mesh": "incomplete", "export": "missing", "evaluate": "missing"}
+    for stage in ("poses", "train", "export"):
+        assert "This stage has not run" in _section(document, stage) and f"orca {stage}" in _section(document, stage)
+    assert "No evaluation" in _section(document, "evaluate")
+    assert "mesh/mesh_report.json is missing" in page.body
+    assert len(Page(_section(document, "mesh")).images) == 1, "mesh.png is still shown"
+    # text from the files is escaped, never markup
+    assert "script" not in page.tags and "<b>" not in document
+    assert "&lt;script&gt;alert(1)&lt;/script&gt;" in document and "&amp; &quot;friends&quot;" in document
+    assert 'view <b>IMG_0001</b> & "friends" <script>alert(1)</script>' in page.body
+
+
+def test_not_a_results_folder(tmp_path, tiny_capture):
+    with pytest.raises(InputError, match="results folder not found") as e:
+        run_report(tmp_path / "nowhere")
+    assert str(tmp_path / "nowhere") in str(e.value)
+    with pytest.raises(InputError, match="not a results folder: none of decode/") as e:
+        run_report(tiny_capture)  # a capture folder, not its results
+    assert str(tiny_capture) in str(e.value)
+    (tmp_path / "a_file").write_text("x")
+    with pytest.raises(InputError, match="a file, not a folder"):
+        run_report(tmp_path / "a_file")
+    assert main(["report", str(tmp_path / "nowhere")]) == 2
+    assert not (tmp_path / "nowhere").exists(), "nothing written"
