@@ -246,8 +246,9 @@ class Page:
 def _missing_stage(page: Page, stage: str) -> str:
     folder = page.results / stage
     if stage == "evaluate":
-        return (f'<p class="missing">No evaluation: {esc(folder)} does not exist. Only a synthetic capture (one '
-                "with <code>ground_truth/</code>) is evaluated, by <code>orca evaluate</code>.</p>")
+        return (f'<p class="missing">No evaluation: {esc(folder)} does not exist. A synthetic capture (one with '
+                "<code>ground_truth/</code>) is evaluated by <code>orca evaluate</code>; a real capture has no ground "
+                "truth to compare with.</p>")
     return (f'<p class="missing">This stage has not run: {esc(folder)} does not exist. Run '
             f"<code>orca {esc(stage)}</code> (or <code>snakemake</code>) to make it.</p>")
 
