@@ -68,9 +68,13 @@ class OrcaModel(nn.Module):
         cap = s.beta_init * (s.beta_final / s.beta_init) ** fraction
         self.log_beta.clamp_(max=math.log(max(cap - s.beta_min, 1e-12)))
 
-    def forward(self, origins: torch.Tensor, dirs: torch.Tensor, radii: torch.Tensor) -> RayOutputs:
-        """Object rays ``(N, 3), (N, 3), (N,)`` -> :class:`RayOutputs`."""
-        return render_rays(self.sdf_field, self.env_field, self.beta, origins, dirs, radii, self.spec.render)
+    def forward(
+        self, origins: torch.Tensor, dirs: torch.Tensor, radii: torch.Tensor, specular: bool = True
+    ) -> RayOutputs:
+        """Object rays ``(N, 3), (N, 3), (N,)`` -> :class:`RayOutputs` (``specular=False``: no virtual cones)."""
+        return render_rays(
+            self.sdf_field, self.env_field, self.beta, origins, dirs, radii, self.spec.render, specular
+        )
 
     def environment(
         self, origins: torch.Tensor, dirs: torch.Tensor, radii: torch.Tensor
@@ -133,7 +137,8 @@ def objective(
     Returns:
         total loss, the unweighted terms (detached, for logging), and the render.
     """
-    out = model(batch.origins, batch.dirs, batch.radii)
+    # the warm-up uses geometry alone: the virtual cones (the environment along each) would be wasted
+    out = model(batch.origins, batch.dirs, batch.radii, specular=phase == "joint")
     obj = batch.mask > 0.5
     terms: dict[str, torch.Tensor] = {
         "mask": mask_loss(out.opacity, batch.mask),

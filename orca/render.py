@@ -198,6 +198,7 @@ def render_rays(
     dirs: torch.Tensor,
     radii: torch.Tensor,
     spec: RenderSpec = RenderSpec(),
+    specular: bool = True,
 ) -> RayOutputs:
     """Render primary rays through the object.
 
@@ -205,6 +206,8 @@ def render_rays(
         beta: scalar VolSDF β (learnable; positive).
         origins: ``(N, 3)`` camera centres; dirs: ``(N, 3)`` unit directions; radii: ``(N,)`` pixel-cone
             radius growth (mip-NeRF ``radii``).
+        specular: False skips the virtual cones (specular zero, no cone weights): geometry alone, as the
+            mask-only warm-up needs, at a fraction of the cost.
     """
     n = origins.shape[0]
     near, far, _ = ray_sphere_bounds(origins, dirs, spec.object_radius)
@@ -237,6 +240,12 @@ def render_rays(
     normal_map = (w[..., None] * normals).sum(-2)
     depth = (w * mid).sum(-1)
 
+    if not specular:
+        empty = torch.zeros(n, 0, 0, dtype=w.dtype, device=w.device)
+        return RayOutputs(
+            rgb=diffuse, diffuse=diffuse, specular=torch.zeros_like(diffuse), normal=normal_map, opacity=opacity,
+            depth=depth, sdf_grad=grad.reshape(n, s_count, 3), weights=w, t=t, env_weights=empty, env_s=empty,
+        )
     # Virtual cones at the highest-weight samples only.
     k = min(spec.cone_samples, s_count)
     top = torch.topk(w.detach(), k, dim=-1).indices  # (N, K)

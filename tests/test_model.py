@@ -93,6 +93,26 @@ def test_schedule_opens_sdf_levels_coarse_to_fine_and_caps_beta():
     assert model.beta.item() < cap
 
 
+def test_warm_up_renders_geometry_without_virtual_cones():
+    """``specular=False`` (the mask phase) gives the same geometry and diffuse as a full render, no specular
+    and no cone weights; the object rays then give the environment field no gradient."""
+    from dataclasses import replace
+
+    model = _model()
+    model.spec = replace(model.spec, render=replace(model.spec.render, deterministic=True))  # same samples twice
+    batch = _batch(seed=3)
+    with torch.no_grad():
+        full = model(batch.origins, batch.dirs, batch.radii)
+        plain = model(batch.origins, batch.dirs, batch.radii, specular=False)
+    for key in ("opacity", "diffuse", "normal", "depth"):
+        assert torch.allclose(getattr(full, key), getattr(plain, key), atol=1e-6), key
+    assert full.specular.abs().sum() > 0 and plain.specular.abs().sum() == 0
+    assert plain.env_weights.numel() == 0 and torch.equal(plain.rgb, plain.diffuse)
+    total, _, _ = objective(model, batch, LossWeights(background=0.0), "mask")
+    total.backward()
+    assert all(p.grad is None or p.grad.abs().sum() == 0 for p in model.env_field.parameters())
+
+
 def test_background_batch_trains_only_the_environment_field():
     """Extra off-object rays add to the background term; their gradient reaches the environment field,
     never the SDF (the object's inside is masked without a graph)."""
