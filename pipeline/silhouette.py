@@ -110,6 +110,9 @@ class SegmentOptions:
     occluder_reach_px: int = 6
     sweep_far: float = 4.0
     seed_radius: float = 0.3
+    weak_weight: float = 1.0
+    dark_level: int = 0
+    final_reach_px: int = -1
 
 
 @dataclass
@@ -347,7 +350,7 @@ OUTSIDE_VOTES = 1.0e3  # the "background votes" of voxels outside the carved reg
 
 
 def carve(masks: Sequence[np.ndarray], views: Sequence[View], points: np.ndarray, index: np.ndarray,
-          resolution: int) -> np.ndarray:
+          resolution: int, weak: Sequence[np.ndarray | None] | None = None, weak_weight: float = 1.0) -> np.ndarray:
     """``(R, R, R)`` float32 background votes: for each voxel, in how many views that see it it lands off the
     object (:data:`OUTSIDE_VOTES` for voxels outside the region or seen by fewer than half the views). The hull
     is where the votes are below a small number: one view's mistake does not cut the object, while a voxel next
@@ -355,7 +358,12 @@ def carve(masks: Sequence[np.ndarray], views: Sequence[View], points: np.ndarray
     c2w = np.stack([v.c2w for v in views])
     K = np.stack([v.K for v in views])
     seen, hits = mask_votes(masks, c2w, K, points)
-    votes = np.where(seen >= 0.5 * len(views), seen - hits, OUTSIDE_VOTES).astype(np.float32)
+    off = (seen - hits).astype(np.float32)
+    if weak is not None and weak_weight != 1.0:
+        doubtful = [np.zeros(m.shape, bool) if w is None else w & ~m for m, w in zip(masks, weak)]
+        _, weak_hits = mask_votes(doubtful, c2w, K, points)
+        off -= (1.0 - weak_weight) * weak_hits
+    votes = np.where(seen >= 0.5 * len(views), off, OUTSIDE_VOTES).astype(np.float32)
     volume = np.full(resolution**3, OUTSIDE_VOTES, np.float32)
     volume[index] = votes
     return volume.reshape((resolution,) * 3)
@@ -541,18 +549,41 @@ def iou(a: np.ndarray, b: np.ndarray) -> float:
 # -------------------------------------------------------------------------------------------- the driver
 
 
-def segment(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.ndarray] | None = None,
-            on_step: Callable[[str], None] | None = None) -> Segmentation:
-    """Object masks for every view (see the module doc).
+def _doubtful(views: Sequence[View], shapes: Sequence[np.ndarray], backgrounds: Sequence[np.ndarray],
+              floors: Sequence[np.ndarray | None], fixed: dict[int, np.ndarray], opts: SegmentOptions
+              ) -> list[np.ndarray | None]:
+    """Per view, where a background vote is doubtful: neither certain background (outside the sphere, swept,
+    floor) nor of a colour clearly the background's (:func:`colour_background` around ``shapes``, the hull's
+    reprojection or the mask): a dark bottom on its dark shadow, a rim mirroring its surroundings."""
+    out: list[np.ndarray | None] = []
+    for i, v in enumerate(views):
+        if i in fixed:
+            out.append(None)
+            continue
+        sure = backgrounds[i] | (v.image.max(-1) > opts.dark_level)
+        if floors[i] is not None:
+            sure = sure | floors[i]
+        out.append(~sure)
+    return out
 
-    Args:
-        views: the photos at the working size, cameras in the normalized frame.
-        fixed: view index -> ``(H, W)`` bool mask the user gave: kept as is, and it votes in every carve.
-        on_step: called with a short label after each unit of work (progress bars).
-    """
+
+@dataclass
+class Evidence:
+    """What :func:`gather_evidence` found before any hull (per view, at the working size)."""
+
+    plane: Plane | None
+    spheres: list[np.ndarray]  # (H, W) float32: distance of each pixel's ray from the centre (< 1: in the sphere)
+    floors: list[np.ndarray | None]  # pixels the support plane explains
+    above: list[np.ndarray | None]  # pixels the support plane clearly does not explain
+    backgrounds: list[np.ndarray]  # certain background: outside the sphere's image, or swept
+    occluded: list[np.ndarray | None]  # pixels a surface outside the sphere explains
+    masks: list[np.ndarray]  # the first GrabCut masks (the user's where fixed)
+
+
+def gather_evidence(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.ndarray] | None = None,
+                    step: Callable[[str], None] = lambda label: None) -> Evidence:
+    """The support plane, floor and swept evidence per view, and the first masks from the sphere prior."""
     fixed = fixed or {}
-    step = on_step or (lambda label: None)
-    n = len(views)
     nbrs = neighbours(views, opts.neighbours, opts.neighbour_max_deg)
     plane = find_support_plane(views, nbrs, opts) if opts.floor else None
     step("support plane")
@@ -578,11 +609,10 @@ def segment(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.nda
             cost = plane_cost(v, [views[j] for j in nbrs[i]], plane.normal, plane.offset, opts.consistency_rank)
             floors.append(_floor_from_cost(cost, outside, opts))
             above.append((cost > opts.not_floor_threshold) & ~outside)
-            backgrounds.append(outside)
         else:
             floors.append(None)
             above.append(None)
-            backgrounds.append(outside)
+        backgrounds.append(outside)
         if occluded[i] is not None:
             backgrounds[i] = backgrounds[i] | occluded[i]
         step("floor")
@@ -596,13 +626,39 @@ def segment(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.nda
             masks.append(grabcut(v.image, first_seeds(spheres[i], certain, opts.seed_radius, above[i]),
                                  opts.grabcut_iterations))
         step("segment")
+    return Evidence(plane, spheres, floors, above, backgrounds, occluded, masks)
 
+
+def segment(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.ndarray] | None = None,
+            on_step: Callable[[str], None] | None = None) -> Segmentation:
+    """Object masks for every view (see the module doc).
+
+    Args:
+        views: the photos at the working size, cameras in the normalized frame.
+        fixed: view index -> ``(H, W)`` bool mask the user gave: kept as is, and it votes in every carve.
+        on_step: called with a short label after each unit of work (progress bars).
+    """
+    step = on_step or (lambda label: None)
+    evidence = gather_evidence(views, opts, fixed, step)
+    return refine(views, opts, evidence, fixed, step)
+
+
+def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixed: dict[int, np.ndarray] | None = None,
+           step: Callable[[str], None] = lambda label: None) -> Segmentation:
+    """Rounds of carving and GrabCut from the ``evidence``, then the final masks (see the module doc)."""
+    fixed = fixed or {}
+    n = len(views)
+    plane, spheres, backgrounds, occluded = evidence.plane, evidence.spheres, evidence.backgrounds, evidence.occluded
+    floors = list(evidence.floors)
+    masks = list(evidence.masks)
+    nbrs = neighbours(views, opts.neighbours, opts.neighbour_max_deg)
     points, index = hull_grid(opts.hull_resolution, plane)
     rounds: list[dict[str, float]] = []
     hulls: list[np.ndarray] = []
     volume = np.full((opts.hull_resolution,) * 3, OUTSIDE_VOTES, np.float32)
+    weak = _doubtful(views, masks, backgrounds, floors, fixed, opts) if opts.weak_weight != 1.0 else None
     for r in range(opts.rounds):
-        volume = carve(masks, views, points, index, opts.hull_resolution)
+        volume = carve(masks, views, points, index, opts.hull_resolution, weak, opts.weak_weight)
         # Generous early, strict at the end: the first masks (from the sphere prior alone) miss pieces that
         # later rounds, seeded by a hull that kept them, can find again.
         votes = carve_votes(opts, n) + opts.votes_relax * (opts.rounds - 1 - r)
@@ -631,6 +687,8 @@ def segment(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.nda
                                    v.clipped)
                 new.append(grabcut(v.image, seeds, opts.grabcut_iterations))
             step("segment")
+        if opts.weak_weight != 1.0:
+            weak = _doubtful(views, hulls, backgrounds, floors, fixed, opts)
         agreement = [iou(a, b) for a, b in zip(new, hulls)]
         change = [iou(a, b) for a, b in zip(new, masks)]
         rounds.append({"agreement_median": float(np.median(agreement)), "agreement_min": float(np.min(agreement)),
@@ -645,6 +703,10 @@ def segment(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.nda
     final = []
     for i, (m, h) in enumerate(zip(masks, hulls)):
         if i not in fixed:
-            m = h & ~backgrounds[i] & ~occluded_region(h, m, occluded[i])
+            if opts.final_reach_px >= 0:
+                near = cv2.dilate(m.astype(np.uint8), _disc(opts.final_reach_px)) > 0 if opts.final_reach_px else m
+                m = h & near & ~backgrounds[i]
+            else:
+                m = h & ~backgrounds[i] & ~occluded_region(h, m, occluded[i])
         final.append(m)
     return Segmentation(final, masks, hulls, floors, occluded, plane, volume, rounds)
