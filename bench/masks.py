@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import subprocess
 import tempfile
 import time
 from pathlib import Path
@@ -31,7 +32,12 @@ def main() -> None:
     parser.add_argument("--poses", type=Path, required=True)
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="masks.KEY=VALUE")
     parser.add_argument("--out", type=Path, default=None, help="keep the masks folder here")
+    parser.add_argument("--threads", type=int, default=0, help="OpenCV threads (0: OpenCV's default)")
     args = parser.parse_args()
+    if args.threads:
+        import cv2
+
+        cv2.setNumThreads(args.threads)
     config = load_config(overrides=["masks.user_masks=ignore", *args.overrides]).masks
     with tempfile.TemporaryDirectory() as tmp:
         out = args.out or Path(tmp) / "masks"
@@ -48,6 +54,8 @@ def main() -> None:
         "iou_worst": round(float(values.min()), 4), "worst_view": worst, "iou_mean": round(float(values.mean()), 4),
         "seconds": round(seconds, 1), "overrides": args.overrides,
         "hull_agreement_median": round(result.agreement["median"], 4),
+        "commit": subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                                 cwd=Path(__file__).parent, check=False).stdout.strip(),
     }
     results = Path(__file__).parent / "results"
     results.mkdir(exist_ok=True)

@@ -152,6 +152,21 @@ class MasksConfig(StrictModel):
         0.3, ge=0, lt=1, description="before any hull, the central part of the unit sphere's image (this fraction of "
         "its radius) is taken as object: the cameras converge on it"
     )
+    doubtful_vote: float = Field(
+        0.75, ge=0, le=1, description="a background vote counts this much where the view's pixel is dark (see "
+        "dark_level) and no evidence (outside the sphere, floor, depth sweep) confirms it: a dark object bottom on "
+        "its dark contact shadow is lost by colour in the views from above; the views that see it against a lit "
+        "background keep it (1: every vote counts fully)"
+    )
+    dark_level: int = Field(
+        48, ge=0, le=255, description="pixels whose brightest sRGB channel is at most this are dark (doubtful_vote)"
+    )
+    final_reach_px: int = Field(
+        1, ge=-1, description="a view's final mask is the visual hull's reprojection within this many pixels of the "
+        "view's own GrabCut mask (the hull keeps what one view's colours lose inside, the view's colours trim the "
+        "hull's overhang at the outline); -1: the hull's reprojection less certain background and the pieces "
+        "GrabCut gave to a prop in front"
+    )
     neighbours: int = Field(6, ge=1, description="views compared with each view (support-plane test)")
     neighbour_max_deg: float = Field(60.0, gt=0, le=180, description="...at most this far around the object")
     consistency_rank: int = Field(

@@ -19,11 +19,15 @@ Three cues, each cheap and each weak alone, made to agree:
 They are made to agree by **visual-hull carving**: a voxel of the unit sphere is cut when ``carve_share`` of
 the views (at least ``carve_votes``) see it off the object: a few, not one, so that a view that misses a piece
 does not cut it out of every other view; not many, because next to a thin part only the few views looking
-along it can see the gap. The hull, reprojected into every view, seeds the next round
-of GrabCut; a few rounds settle. The final mask of a view is the last hull's reprojection -- the views agree on
-it, and it keeps what one view's colours lose (a glossy rim mirroring the background at grazing angles, a dark
-bottom on its dark shadow) -- less that view's certain background and, where a prop in front of the object
-was seen, the pieces GrabCut gave to the prop (the hull knows nothing of occlusion).
+along it can see the gap. A background vote counts fully where evidence confirms it (outside the sphere, the
+floor, the depth sweep) or where the pixel is not dark; a dark pixel's vote that nothing confirms counts
+``weak_weight`` (0.75): the dark bottom of a glossy object on its dark contact shadow is lost by colour in every
+view from above, and only the few views that see it against a lit background say otherwise. The hull,
+reprojected into every view, seeds the next round of GrabCut; a few rounds settle. The final mask of a view is
+the last hull's reprojection within ``final_reach_px`` (1) of that view's last GrabCut mask, less certain
+background: the hull keeps what one view's colours lose inside the object (a glossy rim mirroring the
+background, a dark bottom), the view's own colours trim the hull's overhang at the outline (the hull is
+larger than the object wherever fewer than ``carve_share`` of the views see past it) and cut the pieces of the hull hidden by a prop in front (GrabCut gives them to the prop).
 
 Failure cases (documented in the README): an object not standing on a visible textured plane (hanging,
 held, on a textureless table: cue 2 finds nothing and the contact shadow may stay in the masks); an
@@ -110,9 +114,9 @@ class SegmentOptions:
     occluder_reach_px: int = 6
     sweep_far: float = 4.0
     seed_radius: float = 0.3
-    weak_weight: float = 1.0
-    dark_level: int = 0
-    final_reach_px: int = -1
+    weak_weight: float = 0.75
+    dark_level: int = 48
+    final_reach_px: int = 1
 
 
 @dataclass
@@ -354,7 +358,8 @@ def carve(masks: Sequence[np.ndarray], views: Sequence[View], points: np.ndarray
     """``(R, R, R)`` float32 background votes: for each voxel, in how many views that see it it lands off the
     object (:data:`OUTSIDE_VOTES` for voxels outside the region or seen by fewer than half the views). The hull
     is where the votes are below a small number: one view's mistake does not cut the object, while a voxel next
-    to a thin object, off its silhouette in only the few views that look along the thin side, is still cut."""
+    to a thin object, off its silhouette in only the few views that look along the thin side, is still cut.
+    ``weak``: per view, ``(H, W)`` bool where a background vote counts only ``weak_weight`` (None: fully)."""
     c2w = np.stack([v.c2w for v in views])
     K = np.stack([v.K for v in views])
     seen, hits = mask_votes(masks, c2w, K, points)
@@ -549,12 +554,11 @@ def iou(a: np.ndarray, b: np.ndarray) -> float:
 # -------------------------------------------------------------------------------------------- the driver
 
 
-def _doubtful(views: Sequence[View], shapes: Sequence[np.ndarray], backgrounds: Sequence[np.ndarray],
-              floors: Sequence[np.ndarray | None], fixed: dict[int, np.ndarray], opts: SegmentOptions
-              ) -> list[np.ndarray | None]:
-    """Per view, where a background vote is doubtful: neither certain background (outside the sphere, swept,
-    floor) nor of a colour clearly the background's (:func:`colour_background` around ``shapes``, the hull's
-    reprojection or the mask): a dark bottom on its dark shadow, a rim mirroring its surroundings."""
+def _doubtful(views: Sequence[View], backgrounds: Sequence[np.ndarray], floors: Sequence[np.ndarray | None],
+              fixed: dict[int, np.ndarray], opts: SegmentOptions) -> list[np.ndarray | None]:
+    """Per view, where a background vote is doubtful: dark pixels (brightest channel <= ``dark_level``) that no
+    evidence confirms as background (outside the sphere, swept, floor) -- a dark object bottom and its dark
+    contact shadow look alike, and views from above lose the bottom by colour."""
     out: list[np.ndarray | None] = []
     for i, v in enumerate(views):
         if i in fixed:
@@ -656,8 +660,8 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
     rounds: list[dict[str, float]] = []
     hulls: list[np.ndarray] = []
     volume = np.full((opts.hull_resolution,) * 3, OUTSIDE_VOTES, np.float32)
-    weak = _doubtful(views, masks, backgrounds, floors, fixed, opts) if opts.weak_weight != 1.0 else None
     for r in range(opts.rounds):
+        weak = _doubtful(views, backgrounds, floors, fixed, opts) if opts.weak_weight != 1.0 else None
         volume = carve(masks, views, points, index, opts.hull_resolution, weak, opts.weak_weight)
         # Generous early, strict at the end: the first masks (from the sphere prior alone) miss pieces that
         # later rounds, seeded by a hull that kept them, can find again.
@@ -687,8 +691,6 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
                                    v.clipped)
                 new.append(grabcut(v.image, seeds, opts.grabcut_iterations))
             step("segment")
-        if opts.weak_weight != 1.0:
-            weak = _doubtful(views, hulls, backgrounds, floors, fixed, opts)
         agreement = [iou(a, b) for a, b in zip(new, hulls)]
         change = [iou(a, b) for a, b in zip(new, masks)]
         rounds.append({"agreement_median": float(np.median(agreement)), "agreement_min": float(np.min(agreement)),

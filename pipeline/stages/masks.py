@@ -356,7 +356,8 @@ def _segment_options(config: MasksConfig) -> Any:
         neighbour_max_deg=config.neighbour_max_deg, consistency_rank=config.consistency_rank, floor=config.floor,
         floor_threshold=config.floor_threshold, occluders=config.sweep, occluder_neighbours=config.sweep_neighbours,
         occluder_rank=config.sweep_rank, occluder_threshold=config.sweep_threshold,
-        texture_threshold=config.texture_threshold,
+        texture_threshold=config.texture_threshold, weak_weight=config.doubtful_vote, dark_level=config.dark_level,
+        final_reach_px=config.final_reach_px,
     )
 
 
