@@ -129,6 +129,26 @@ def test_the_hull_of_exact_sphere_masks_reprojects_to_them():
     assert all(iou(reproject(votes, v, 0.5), s) < 0.5 for v, s in zip(views, hull_sphere))
 
 
+def test_doubtful_background_votes_count_less():
+    """Every view loses the lower third of a sphere's silhouette (a dark bottom on its dark shadow): with full
+    votes the hull loses it; with those pixels' votes marked doubtful and counting 0.1 the hull keeps it."""
+    views = ring_views(12) + ring_views(12, elevation_deg=50.0)
+    truth = [sphere_distance(v, radius=0.6) < 1.0 for v in views]
+    lost, doubtful = [], []
+    for m in truth:
+        ys = np.nonzero(m)[0]
+        bottom = m.copy()
+        bottom[: ys.min() + 2 * (ys.max() - ys.min()) // 3] = False
+        lost.append(m & ~bottom)
+        doubtful.append(bottom)
+    points, index = hull_grid(64, None)
+    full = carve(lost, views, points, index, 64)
+    weighted = carve(lost, views, points, index, 64, doubtful, 0.1)
+    for v, m in zip(views[::6], truth[::6]):
+        assert iou(reproject(full, v, 4.5), m) < 0.85
+        assert iou(reproject(weighted, v, 4.5), m) > 0.9
+
+
 # ------------------------------------------------------------------------------------------ the stage
 
 
@@ -224,6 +244,7 @@ def test_automatic_masks_of_the_sphere_with_two_corrections(sfm_sphere_capture, 
     auto = [s for n, s in scores.items() if n not in result.user]
     print(f"sphere: IoU median {np.median(auto):.3f} worst {min(auto):.3f} in {seconds:.0f} s; {result.agreement}")
     assert result.user == ["IMG_0003", "IMG_0011"] and scores["IMG_0003"] == scores["IMG_0011"] == 1.0
-    assert np.median(auto) >= 0.93 and min(auto) >= 0.88, scores  # measured: 0.952, 0.925 (88 s)
+    # the issue's goal is 0.95 / 0.85; measured: 0.965, 0.950 (96 s; 0.952, 0.925 before the doubtful votes)
+    assert np.median(auto) >= 0.95 and min(auto) >= 0.93, scores
     # the tight sphere: the true object (radius 1 in the ground truth's frame) nearly fills it
     assert result.sphere_radius < 0.8
