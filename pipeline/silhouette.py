@@ -27,7 +27,8 @@ reprojected into every view, seeds the next round of GrabCut; a few rounds settl
 the last hull's reprojection within ``final_reach_px`` (1) of that view's last GrabCut mask, less certain
 background: the hull keeps what one view's colours lose inside the object (a glossy rim mirroring the
 background, a dark bottom), the view's own colours trim the hull's overhang at the outline (the hull is
-larger than the object wherever fewer than ``carve_share`` of the views see past it) and cut the pieces of the hull hidden by a prop in front (GrabCut gives them to the prop).
+larger than the object wherever fewer than ``carve_share`` of the views see past it) and cut the pieces of the
+hull hidden by a prop in front (GrabCut gives them to the prop).
 
 Failure cases (documented in the README): an object not standing on a visible textured plane (hanging,
 held, on a textureless table: cue 2 finds nothing and the contact shadow may stay in the masks); an
