@@ -25,6 +25,7 @@ Encoding = Literal["hashgrid", "frequency"]
 
 # Radius of the contracted space (mip-NeRF 360 maps all of R^3 into a ball of radius 2).
 _CONTRACTED_RADIUS = 2.0
+_MIN_VARIANCE = 1e-12  # floor of a frustum's variance under a square root
 
 
 def mlp(in_dim: int, hidden: int, layers: int, out_dim: int, smooth: bool = True) -> nn.Sequential:
@@ -169,8 +170,10 @@ class EnvironmentField(nn.Module):
         c_mean, c_var = contract_gaussian(means / r0, variances / r0**2)
         if self.grid is not None:
             unit = (c_mean / _CONTRACTED_RADIUS + 1) * 0.5
-            # footprint std in [0, 1] grid units: mean per-axis std of the contracted Gaussian
-            scale = c_var.clamp_min(0).mean(-1).sqrt() / (2 * _CONTRACTED_RADIUS)
+            # footprint std in [0, 1] grid units: mean per-axis std of the contracted Gaussian. A zero-length
+            # frustum at a cone's apex (coarse and fine edges coincide there) has zero variance, where
+            # sqrt's gradient is infinite: the floor keeps it finite (and zero below the floor).
+            scale = c_var.clamp_min(0).mean(-1).clamp_min(_MIN_VARIANCE).sqrt() / (2 * _CONTRACTED_RADIUS)
             enc = self.grid(unit.reshape(-1, 3), scale.reshape(-1)).reshape(n, s, -1)
         else:
             enc = integrated_positional_encoding(c_mean, c_var, 0, self.spec.ipe_max_deg)

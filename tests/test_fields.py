@@ -73,3 +73,19 @@ def test_diffuse_head_reads_its_own_texture_grid_and_survives_feature_drift():
     # features a thousand times larger (what the mask warm-up can do to them) leave the output in range
     drifted = field.diffuse(x, feats.detach() * 1000)
     assert drifted.max() < 1.0 and drifted.min() > 1e-3
+
+
+def test_environment_field_gradients_stay_finite_for_zero_length_frustums():
+    """A frustum of zero length at a cone's apex has zero variance; its gradient must not be NaN (it was,
+    through the footprint's square root, and stopped a naive-cone training run)."""
+    from orca.fields import EnvironmentField, EnvironmentFieldSpec
+
+    spec = EnvironmentFieldSpec(hash_grid=HashGridSpec(levels=4, log2_table_size=10, base_resolution=4,
+                                                       max_resolution=32))
+    field = EnvironmentField(spec)
+    means = torch.randn(4, 5, 3, requires_grad=True)
+    variances = torch.zeros(4, 5, 3, requires_grad=True)
+    density, radiance = field(means, variances, torch.nn.functional.normalize(torch.randn(4, 3), dim=-1))
+    (density.sum() + radiance.sum()).backward()
+    assert torch.isfinite(means.grad).all() and torch.isfinite(variances.grad).all()
+    assert means.grad.abs().sum() > 0
