@@ -64,7 +64,9 @@ def bench_preset(preset: str, device: torch.device, steps: int, warmup: int) -> 
 
     def step() -> None:
         batch = data.sample(cfg.batch_rays, cfg.object_fraction, g)
-        total, _, _ = objective(model, batch, weights, "joint")
+        # the off-object rays of the environment field, as `orca train` draws them every iteration
+        background = data.sample_background(cfg.background_rays, g) if cfg.background_rays else None
+        total, _, _ = objective(model, batch, weights, "joint", background)
         optimizer.zero_grad(set_to_none=True)
         total.backward()
         torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
@@ -93,7 +95,8 @@ def bench_preset(preset: str, device: torch.device, steps: int, warmup: int) -> 
         sync()
         render_s = (time.perf_counter() - t0) / max(steps // 2, 1)
     return {
-        "preset": preset, "batch_rays": cfg.batch_rays, "iterations": cfg.iterations,
+        "preset": preset, "batch_rays": cfg.batch_rays, "background_rays": cfg.background_rays,
+        "iterations": cfg.iterations,
         "seconds_per_iteration": per_step, "train_rays_per_second": cfg.batch_rays / per_step,
         "render_rays_per_second": cfg.batch_rays / render_s,
         "full_training_minutes": per_step * cfg.iterations / 60,
@@ -115,7 +118,8 @@ def main() -> None:
         row = bench_preset(preset, device, args.steps, args.warmup)
         rows.append(row)
         print(f"{preset:9s} {row['seconds_per_iteration']:8.3f} s/it  {row['train_rays_per_second']:9.0f} train rays/s  "
-              f"{row['render_rays_per_second']:9.0f} render rays/s  (batch {row['batch_rays']}; "
+              f"{row['render_rays_per_second']:9.0f} render rays/s  (batch {row['batch_rays']} + "
+              f"{row['background_rays']} background; "
               f"{row['iterations']} iterations = {row['full_training_minutes']:.1f} min)", flush=True)
     machine = {
         "device": torch.cuda.get_device_name(0) if device.type == "cuda" else platform.processor() or platform.machine(),
