@@ -79,7 +79,7 @@ class OrcaModel(nn.Module):
     def environment(
         self, origins: torch.Tensor, dirs: torch.Tensor, radii: torch.Tensor
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """Radiance ``(N, 3)`` and z-free ray depth ``(N,)`` of the environment field alone (object absent),
+        """Radiance ``(N, 3)`` and median ray depth ``(N,)`` of the environment field alone (object absent),
         seen by ordinary camera cones from ``origins``. The object's inside is empty (see ``solid``)."""
         rgb, depth, _, _ = render_environment_along(
             self.env_field, origins, dirs, radii, torch.zeros_like(radii), self.spec.render, self.solid

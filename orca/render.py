@@ -132,8 +132,8 @@ def render_environment_along(
     Args:
         apex, axis: ``(M, 3)``; radius_growth, t_start: ``(M,)``.
     Returns:
-        radiance ``(M, 3)``, median depth past the start ``(M,)`` (:func:`median_depth`), weights ``(M, E)``, normalized edges
-        ``(M, E + 1)`` (E = env_samples + env_fine). A directional (2D map) field gives infinite depth and
+        radiance ``(M, 3)``, median depth past the start ``(M,)`` (:func:`~orca.volume.median_depth`),
+        weights ``(M, E)``, normalized edges ``(M, E + 1)`` (E = env_samples + env_fine). A directional (2D map) field gives infinite depth and
         zero weights.
     """
     m = apex.shape[0]

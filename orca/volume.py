@@ -57,8 +57,8 @@ def median_depth(weights: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
     cum = torch.cumsum(weights, dim=-1)
     half = 0.5 * cum[..., -1:]
     i = torch.searchsorted(cum.contiguous(), half.contiguous()).clamp(max=weights.shape[-1] - 1)
-    before = (cum.gather(-1, i) - weights.gather(-1, i))
     w_i = weights.gather(-1, i)
+    before = cum.gather(-1, i) - w_i
     frac = ((half - before) / w_i.clamp_min(1e-12)).clamp(0, 1)
     t0, t1 = t.gather(-1, i), t.gather(-1, i + 1)
     depth = (t0 + frac * (t1 - t0)).squeeze(-1)
