@@ -240,25 +240,23 @@ def render_rays(
     normal_map = (w[..., None] * normals).sum(-2)
     depth = (w * mid).sum(-1)
 
-    if not specular:
-        empty = torch.zeros(n, 0, 0, dtype=w.dtype, device=w.device)
-        return RayOutputs(
-            rgb=diffuse, diffuse=diffuse, specular=torch.zeros_like(diffuse), normal=normal_map, opacity=opacity,
-            depth=depth, sdf_grad=grad.reshape(n, s_count, 3), weights=w, t=t, env_weights=empty, env_s=empty,
+    if specular:
+        # Virtual cones at the highest-weight samples only.
+        k = min(spec.cone_samples, s_count)
+        top = torch.topk(w.detach(), k, dim=-1).indices  # (N, K)
+        w_k = w.gather(1, top)  # (N, K) differentiable
+        p_k = x.gather(1, top[..., None].expand(n, k, 3))
+        n_k = normals.gather(1, top[..., None].expand(n, k, 3))
+        _, curv = normals_and_curvature_fd(sdf_field.sdf, p_k.reshape(-1, 3), spec.curvature_eps)
+        share = w_k / w_k.sum(-1, keepdim=True).clamp_min(1e-8) * opacity[:, None]  # (N, K)
+        specular_rgb, env_w, env_s = shade_specular(
+            env_field, origins, dirs, radii, p_k, n_k, curv.reshape(n, k), share, spec
         )
-    # Virtual cones at the highest-weight samples only.
-    k = min(spec.cone_samples, s_count)
-    top = torch.topk(w.detach(), k, dim=-1).indices  # (N, K)
-    w_k = w.gather(1, top)  # (N, K) differentiable
-    p_k = x.gather(1, top[..., None].expand(n, k, 3))
-    n_k = normals.gather(1, top[..., None].expand(n, k, 3))
-    _, curv = normals_and_curvature_fd(sdf_field.sdf, p_k.reshape(-1, 3), spec.curvature_eps)
-    share = w_k / w_k.sum(-1, keepdim=True).clamp_min(1e-8) * opacity[:, None]  # (N, K)
-    specular, env_w, env_s = shade_specular(
-        env_field, origins, dirs, radii, p_k, n_k, curv.reshape(n, k), share, spec
-    )
+    else:
+        specular_rgb = torch.zeros_like(diffuse)
+        env_w = env_s = torch.zeros(n, 0, 0, dtype=w.dtype, device=w.device)
     return RayOutputs(
-        rgb=diffuse + specular, diffuse=diffuse, specular=specular, normal=normal_map, opacity=opacity,
+        rgb=diffuse + specular_rgb, diffuse=diffuse, specular=specular_rgb, normal=normal_map, opacity=opacity,
         depth=depth, sdf_grad=grad.reshape(n, s_count, 3), weights=w, t=t,
         env_weights=env_w, env_s=env_s,
     )
