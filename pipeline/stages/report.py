@@ -137,9 +137,9 @@ def details(summary: str, body: str) -> str:
     return f"<details><summary>{esc(summary)}</summary>{body}</details>"
 
 
-def png_data_uri(image: np.ndarray) -> str:
+def png_data_uri(image: np.ndarray, max_width: int = MAX_IMAGE_WIDTH) -> str:
     """``(H, W)`` / ``(H, W, 3|4)`` uint8 or uint16 array in RGB(A) order -> ``data:image/png;base64,...``,
-    shrunk to :data:`MAX_IMAGE_WIDTH` wide."""
+    shrunk to ``max_width`` wide."""
     import cv2
 
     image = np.asarray(image)
@@ -147,9 +147,9 @@ def png_data_uri(image: np.ndarray) -> str:
         image = (image >> 8).astype(np.uint8)
     elif image.dtype != np.uint8:
         image = np.round(np.clip(image, 0, 1) * 255).astype(np.uint8)
-    if image.shape[1] > MAX_IMAGE_WIDTH:
-        h = max(1, round(image.shape[0] * MAX_IMAGE_WIDTH / image.shape[1]))
-        image = cv2.resize(image, (MAX_IMAGE_WIDTH, h), interpolation=cv2.INTER_AREA)
+    if image.shape[1] > max_width:
+        h = max(1, round(image.shape[0] * max_width / image.shape[1]))
+        image = cv2.resize(image, (max_width, h), interpolation=cv2.INTER_AREA)
     if image.ndim == 3 and image.shape[2] == 3:
         image = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
     elif image.ndim == 3 and image.shape[2] == 4:
@@ -206,13 +206,7 @@ class Page:
                 return f'<p class="missing">{esc(self._rel(path))} is missing.</p>'
             return ""
         try:
-            image = read_image(path)
-            if width is not None and image.shape[1] > width:
-                import cv2
-
-                h = max(1, round(image.shape[0] * width / image.shape[1]))
-                image = cv2.resize(image, (width, h), interpolation=cv2.INTER_AREA)
-            uri = png_data_uri(image)
+            uri = png_data_uri(read_image(path), min(width or MAX_IMAGE_WIDTH, MAX_IMAGE_WIDTH))
         except (OSError, ValueError) as e:
             self.problems.append(f"{self._rel(path)} could not be read: {e}")
             return f'<p class="error">{esc(self._rel(path))} could not be read: {esc(e)}</p>'
@@ -285,6 +279,11 @@ def _stats(values: Sequence[float]) -> dict[str, float] | None:
     return {"min": float(v.min()), "median": float(np.median(v)), "mean": float(v.mean()), "max": float(v.max())}
 
 
+def _size_text(size: Any, sep: str = " x ") -> Any:
+    """A report's ``[width, height]`` as text; anything else as it is."""
+    return f"{size[0]}{sep}{size[1]}" if isinstance(size, list) and len(size) == 2 else size
+
+
 def _evenly(items: Sequence[Any], n: int) -> list[Any]:
     if len(items) <= n:
         return list(items)
@@ -321,7 +320,7 @@ def section_decode(page: Page, folder: Path) -> tuple[str, str]:
         ("capture", meta.get("capture")),
         ("photos decoded", len(images)),
         ("skipped files", ", ".join(meta.get("skipped") or []) or "none"),
-        ("size (width x height)", f"{size[0]} x {size[1]}" if isinstance(size, list) and len(size) == 2 else size),
+        ("size (width x height)", _size_text(size)),
         ("downscale", meta.get("downscale")),
         ("formats", ", ".join(formats)),
         ("reference image", meta.get("reference_image")),
@@ -357,7 +356,7 @@ def section_decode(page: Page, folder: Path) -> tuple[str, str]:
                  for im in images]
     body += details(f"every photo ({len(images)})", grid_table(
         ["name", "file", "format", "shutter (s)", "ISO", "f-number", "exposure scale", "clipped %"], per_image))
-    summary = f"{len(images)} photos" + (f", {size[0]}x{size[1]}" if isinstance(size, list) and len(size) == 2 else "")
+    summary = f"{len(images)} photos" + (f", {_size_text(size, 'x')}" if isinstance(size, list) and len(size) == 2 else "")
     if clip:
         summary += f", clipped {100 * clip['mean']:.2f} % mean"
     return summary, body
@@ -556,7 +555,7 @@ def section_train(page: Page, folder: Path) -> tuple[str, str]:
             ("time in the last run (resumed runs add up)", _duration(report.get("seconds_this_run"))),
             ("device", report.get("device")),
             ("images", len(images)),
-            ("image size", f"{size[0]} x {size[1]}" if isinstance(size, list) and len(size) == 2 else size),
+            ("image size", _size_text(size)),
             ("final beta (VolSDF)", report.get("beta")),
         ]
         if isinstance(config, dict):
@@ -719,6 +718,24 @@ def _metric_rows(means: dict[str, Any]) -> list[tuple[str, Any, str, str]]:
     return rows
 
 
+def _evaluated_views(page: Page, folder: Path, part: Any, title: str, grid: str) -> tuple[str, dict[str, Any]]:
+    """One part of ``evaluate.json`` (object or environment views) as HTML: the means' table, the compared
+    region when the part names one, every view's figures and the comparison grid; and the means. Nothing
+    when the part is absent."""
+    if not isinstance(part, dict):
+        return "", {}
+    means = part.get("mean") or {}
+    per_view = part.get("per_view") or {}
+    keys = list(means)
+    region = f"<p>Region: {esc(part['region'])}</p>" if part.get("region") else ""
+    body = (f"<h3>{esc(title)}: mean of {len(part.get('views') or [])}, 1/{esc(part.get('downscale'))} size</h3>"
+            + grid_table(["metric", "mean", "unit", ""], _metric_rows(means)) + region
+            + details(f"every {title.lower()[:-1]} ({len(per_view)})", grid_table(
+                ["view", *keys], [(n, *[(v or {}).get(k) for k in keys]) for n, v in per_view.items()]))
+            + page.image(folder / grid, f"{title.lower()}: ground truth beside prediction"))
+    return body, means
+
+
 def section_evaluate(page: Page, folder: Path) -> tuple[str, str]:
     results = page.json(folder / "evaluate.json")
     if not isinstance(results, dict):
@@ -731,33 +748,16 @@ def section_evaluate(page: Page, folder: Path) -> tuple[str, str]:
         ("time", _duration(results.get("seconds"))),
     ])
     summary_parts = []
-    obj = results.get("object")
-    if isinstance(obj, dict):
-        means = obj.get("mean") or {}
-        body += (f"<h3>Object views: mean of {len(obj.get('views') or [])}, 1/{esc(obj.get('downscale'))} size</h3>"
-                 + grid_table(["metric", "mean", "unit", ""], _metric_rows(means)))
-        if obj.get("region"):
-            body += f"<p>Region: {esc(obj['region'])}</p>"
-        per_view = obj.get("per_view") or {}
-        keys = [k for k in means]
-        body += details(f"every object view ({len(per_view)})", grid_table(
-            ["view", *keys], [(n, *[(v or {}).get(k) for k in keys]) for n, v in per_view.items()]))
-        body += page.image(folder / "object_grid.png", "object views: ground truth beside prediction")
-        for key, template in (("normal_mae_deg", "normals {:.2f}°"), ("psnr_srgb_specular", "specular {:.1f} dB (sRGB)")):
-            if isinstance(means.get(key), int | float):
-                summary_parts.append(template.format(means[key]))
-    env = results.get("environment")
-    if isinstance(env, dict):
-        means = env.get("mean") or {}
-        body += (f"<h3>Environment views: mean of {len(env.get('views') or [])}, 1/{esc(env.get('downscale'))} size</h3>"
-                 + grid_table(["metric", "mean", "unit", ""], _metric_rows(means)))
-        per_view = env.get("per_view") or {}
-        keys = [k for k in means]
-        body += details(f"every environment view ({len(per_view)})", grid_table(
-            ["view", *keys], [(n, *[(v or {}).get(k) for k in keys]) for n, v in per_view.items()]))
-        body += page.image(folder / "environment_grid.png", "environment views: ground truth beside prediction")
-        if isinstance(means.get("depth_absrel"), int | float):
-            summary_parts.append(f"environment depth AbsRel {means['depth_absrel']:.3g}")
+    html_object, means = _evaluated_views(page, folder, results.get("object"), "Object views", "object_grid.png")
+    body += html_object
+    for key, template in (("normal_mae_deg", "normals {:.2f}°"), ("psnr_srgb_specular", "specular {:.1f} dB (sRGB)")):
+        if isinstance(means.get(key), int | float):
+            summary_parts.append(template.format(means[key]))
+    html_env, means = _evaluated_views(page, folder, results.get("environment"), "Environment views",
+                                       "environment_grid.png")
+    body += html_env
+    if isinstance(means.get("depth_absrel"), int | float):
+        summary_parts.append(f"environment depth AbsRel {means['depth_absrel']:.3g}")
     poses = results.get("poses")
     if isinstance(poses, dict):
         s = poses.get("summary") or {}
