@@ -22,6 +22,18 @@ from typing import Any
 MANIFEST = "manifest.json"
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _as_if_created(path: Path, base_mode: int) -> None:
+    """tempfile creates files 0600 and folders 0700 (private); an artifact gets the modes ``open`` and
+    ``mkdir`` would have given it, so other users and tools (a web server for the report) can read it."""
+    path.chmod(base_mode & ~_umask())
+
+
 def stage_dir(capture: str | Path, stage: str, given: str | Path | None = None) -> Path:
     """A stage's folder: ``given`` when set, else ``results/<capture folder name>/<stage>`` (the CLI default,
     the Snakefile's layout)."""
@@ -36,6 +48,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp" + path.suffix, dir=path.parent)
     os.close(fd)
     tmp = Path(tmp)
+    _as_if_created(tmp, 0o666)
     try:
         yield tmp
         os.replace(tmp, path)
@@ -52,6 +65,7 @@ def atomic_dir(path: str | Path) -> Iterator[Path]:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent))
+    _as_if_created(tmp, 0o777)
     try:
         yield tmp
         if path.exists():

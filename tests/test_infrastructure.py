@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+import stat
 import subprocess
 import sys
 
@@ -110,6 +112,19 @@ def test_atomic_dir_replaces_whole_folder(tmp_path):
     with atomic_dir(out) as tmp:
         (tmp / "new.txt").write_text("y")
     assert sorted(p.name for p in out.iterdir()) == ["new.txt"]
+
+
+def test_atomic_artifacts_get_the_modes_of_plain_files_and_folders(tmp_path):
+    """tempfile's private 0600/0700 must not leak into the artifacts (other users read the results)."""
+    old = os.umask(0o022)
+    try:
+        with atomic_dir(tmp_path / "stage") as tmp:
+            (tmp / "a.txt").write_text("x")
+        write_json(tmp_path / "stage" / "b.json", {"k": 1})
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE((tmp_path / "stage").stat().st_mode) == 0o755
+    assert stat.S_IMODE((tmp_path / "stage" / "b.json").stat().st_mode) == 0o644
 
 
 def test_manifest_records_input_hash_and_versions(tmp_path):
