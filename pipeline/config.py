@@ -465,8 +465,10 @@ def config_from_arguments(args: Any, section: str, capture_yaml: Path | None = N
     fields = type(getattr(PipelineConfig(), section)).model_fields
 
     def qualify(item: str) -> str:
-        key = item.split("=", 1)[0].strip()
-        return f"{section}.{item.strip()}" if "." not in key and key in fields else item
+        # "iterations=500" and "losses.background=0.1" belong to the stage's section; "masks.x=1" does not
+        head = item.split("=", 1)[0].strip().split(".", 1)[0]
+        own = head in fields and head not in PipelineConfig.model_fields
+        return f"{section}.{item.strip()}" if own else item
 
     return load_config(
         capture_yaml if capture_yaml is not None and capture_yaml.is_file() else None,

@@ -174,6 +174,18 @@ def test_config_error_from_an_override_names_the_override(tmp_path):
         load_config(f, overrides=["train.losses.clipped_excess=2"])
 
 
+def test_stage_cli_overrides_may_omit_the_stage_section():
+    import argparse
+
+    from pipeline.config import add_config_arguments, config_from_arguments
+
+    parser = argparse.ArgumentParser()
+    add_config_arguments(parser)
+    args = parser.parse_args(["--set", "iterations=7", "--set", "losses.background=0.25", "--set", "mesh.resolution=64"])
+    cfg = config_from_arguments(args, "train")
+    assert cfg.train.iterations == 7 and cfg.train.losses.background == 0.25 and cfg.mesh.resolution == 64
+
+
 # --- CLI ----------------------------------------------------------------------------------------------
 
 
