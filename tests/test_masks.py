@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from pipeline.artifacts import read_json
-from pipeline.cameras import look_at
+from pipeline.cameras import load_cameras, look_at
 from pipeline.config import MasksConfig, PosesConfig
 from pipeline.errors import InputError
 from pipeline.imageio import read_image, write_png
@@ -200,6 +200,41 @@ def test_user_masks_of_every_encoding_override_on_the_tiny_capture(tiny_capture,
     c_new = cams.cameras[0].c2w[:3, 3]
     np.testing.assert_allclose(c_new, (c_old - sphere["centre"]) / sphere["radius"], atol=1e-9)
     assert all((tmp_path / "masks" / c.image).is_file() for c in cams.cameras)
+
+
+def test_user_masks_follow_the_poses_stage_undistortion(tiny_capture, tiny_decode, tmp_path):
+    """A user draws on the photos; when the poses stage resampled them to pinhole, the masks must be resampled
+    the same way, or they are off by the lens' shift (a few pixels towards the corners)."""
+    import json
+
+    from pipeline.results import load_decode, load_masks
+    from pipeline.stages.masks import run_masks
+    from pipeline.stages.poses import recorded_undistortion, run_poses
+    from pipeline.transforms import to_transforms
+
+    capture = tmp_path / "capture"
+    capture.mkdir()
+    doc = to_transforms(load_cameras(tiny_capture / "ground_truth" / "cameras.json"))
+    doc.update(k1=0.2, k2=0.02)
+    (capture / "transforms.json").write_text(json.dumps(doc))
+    poses = tmp_path / "poses"
+    run_poses(capture, tiny_decode, poses, PosesConfig(use_masks=False))
+    und = recorded_undistortion(load_decode(poses / "undistorted"))
+    assert und is not None and und.max_shift_px > 1
+    truth_dir = tiny_capture / "ground_truth" / "masks"
+    names = sorted(p.stem for p in truth_dir.glob("*.png"))
+    user = tmp_path / "user"
+    user.mkdir()
+    h, w = read_image(truth_dir / f"{names[0]}.png").shape[:2]
+    drawn = np.zeros((h, w), bool)
+    drawn[: h // 3, : w // 3] = True  # a block in the corner, where the lens moves pixels most
+    for n in names:
+        write_png(user / f"{n}.png", drawn.astype(np.uint8) * 255)
+    run_masks(capture, poses, tmp_path / "masks", MasksConfig(), user_masks_dir=user)
+    got = load_masks(tmp_path / "masks").mask(names[0])
+    assert iou(got, drawn) < 0.97, "the mask must move with the image"
+    np.testing.assert_array_equal(got, cv2.remap(drawn.astype(np.uint8), *und.maps[und.lens_of[names[0]]],
+                                                 cv2.INTER_NEAREST) > 0)
 
 
 def test_user_masks_that_do_not_fit_are_refused_with_the_fix(tiny_capture, tiny_decode, tmp_path):

@@ -19,7 +19,8 @@ run) or only a few (corrections: they replace those views' masks and take part i
 improve the others). Files whose name matches no photo, a mask of another aspect ratio, an unreadable file or
 a multi-page TIFF stop the stage with an :class:`~pipeline.errors.InputError` naming the file and the fix;
 a mask at another size with the photo's aspect ratio (drawn on the original while decode downscaled) is
-resized, with a log line.
+resized, with a log line. Drawn on the photos, they are resampled like the photos when the poses stage
+undistorted them (its ``undistorted/decode.json`` records the lenses).
 
 **Bounding sphere**: the visual hull of the final masks (:func:`pipeline.object_frame.sphere_from_masks`,
 the poses stage's function) is the object's bounding sphere, recorded in ``masks_report.json`` as
@@ -55,6 +56,7 @@ if TYPE_CHECKING:
     from ..cameras import CameraSet
     from ..results import DecodeArtifacts
     from ..silhouette import Plane, View
+    from .poses import UndistortMaps
 
 log = logging.getLogger("orca.masks")
 
@@ -160,6 +162,15 @@ def read_user_mask(path: Path, size: tuple[int, int]) -> np.ndarray:
     return m > full / 2
 
 
+def user_mask(path: Path, cam: Any, undistortion: UndistortMaps | None) -> np.ndarray:
+    """A user's mask for camera ``cam``, in the pixel grid of the images the cameras point at: resampled
+    like the photo when the poses stage undistorted it."""
+    from .poses import undistort_mask
+
+    m = read_user_mask(path, (cam.width, cam.height))
+    return undistort_mask(m, undistortion, cam.name) if undistortion is not None else m
+
+
 # -------------------------------------------------------------------------------------------------- images
 
 
@@ -232,6 +243,7 @@ def run_masks(
     from ..object_frame import sphere_from_masks
     from ..results import load_decode
     from ..silhouette import carve, carve_votes, hull_grid, iou, reproject, segment
+    from .poses import recorded_undistortion
 
     started = time.time()
     poses_dir, out_dir = Path(poses_dir), Path(out_dir)
@@ -247,6 +259,8 @@ def run_masks(
         log.warning("--user-masks given but masks.user_masks=ignore: the user masks are not used")
         user_dir = None
     user_files = find_user_masks(Path(user_dir), names) if user_dir is not None else {}
+    # a user draws on the photos; training reads the poses stage's undistorted images when it made them
+    undistortion = recorded_undistortion(decoded) if user_files else None
     if user_dir is not None:
         log.info("user masks for %d of %d views from %s%s", len(user_files), len(names), user_dir,
                  "" if len(user_files) == len(names) else " (the others automatic)")
@@ -262,7 +276,7 @@ def run_masks(
             view = load_view(decoded, cam, scale)
             views.append(view)
             if cam.name in user_files:
-                m = read_user_mask(user_files[cam.name], (cam.width, cam.height))
+                m = user_mask(user_files[cam.name], cam, undistortion)
                 fixed[i] = _reduce(m, view.shape)
             bar.advance(load)
         if len(fixed) == len(views):
@@ -306,7 +320,7 @@ def run_masks(
             for i, (cam, view) in enumerate(zip(cameras.cameras, views)):
                 photo = decoded.srgb(cam.name)
                 if cam.name in user_files:
-                    full = read_user_mask(user_files[cam.name], (cam.width, cam.height))
+                    full = user_mask(user_files[cam.name], cam, undistortion)
                 else:
                     full = full_size_mask(final[i], photo)
                 _write_mask(tmp / MASKS / f"{cam.name}.png", full)

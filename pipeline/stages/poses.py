@@ -247,9 +247,10 @@ def _hull_masks(files: dict[str, Path], posed: Posed, und: UndistortMaps | None,
     small = (max(1, round(size[0] * scale)), max(1, round(size[1] * scale)))
     out = []
     for n in posed.names:
-        m = _read_mask(files[n], size).astype(np.uint8)
+        m = _read_mask(files[n], size)
         if und is not None:
-            m = _remap(m, und.maps[und.lens_of[n]], nearest=True)
+            m = undistort_mask(m, und, n)
+        m = m.astype(np.uint8)
         if scale < 1.0:
             m = cv2.resize(m * np.uint8(255), small, interpolation=cv2.INTER_AREA) > 127
         out.append(m > 0)
@@ -457,6 +458,7 @@ class UndistortMaps:
     maps: list[tuple[np.ndarray, np.ndarray]]  # (map_x, map_y), each (H, W) float32
     lens_of: dict[str, int]
     max_shift_px: float
+    lenses: list[dict[str, Any]]  # COLMAP model, size and parameters of each map's lens (recorded in decode.json)
 
 
 def undistort_map(camera: Any) -> tuple[np.ndarray, np.ndarray, float]:
@@ -491,7 +493,35 @@ def _undistortion(posed: Posed, config: PosesConfig) -> UndistortMaps | None:
     if worst <= config.undistort_threshold_px:
         return None
     log.info("lens distortion moves pixels by up to %.2f px: resampling the decoded images to pinhole", worst)
-    return UndistortMaps(maps, lens_of, worst)
+    lenses = [{"model": c.model_name, "width": int(c.width), "height": int(c.height),
+               "params": [float(p) for p in c.params]} for c in cams]
+    return UndistortMaps(maps, lens_of, worst, lenses)
+
+
+def recorded_undistortion(decoded: DecodeArtifacts) -> UndistortMaps | None:
+    """The undistortion the poses stage applied to an ``undistorted/`` folder (rebuilt from the lenses its
+    ``decode.json`` records), so that images made for the original photos (a user's masks) follow it; None
+    for a folder of photos as decoded."""
+    import pycolmap
+
+    record = decoded.meta.get("undistorted")
+    if record is None:
+        return None
+    if "lenses" not in record:
+        raise InputError("this undistorted folder does not record its lenses (made by an older version)",
+                         decoded.folder / "decode.json", fix="rerun `orca poses` (or snakemake --forcerun poses)")
+    maps, worst = [], 0.0
+    for lens in record["lenses"]:
+        cam = pycolmap.Camera(model=lens["model"], width=lens["width"], height=lens["height"], params=lens["params"])
+        mx, my, shift = undistort_map(cam)
+        maps.append((mx, my))
+        worst = max(worst, shift)
+    return UndistortMaps(maps, dict(record["lens_of"]), worst, list(record["lenses"]))
+
+
+def undistort_mask(mask: np.ndarray, und: UndistortMaps, name: str) -> np.ndarray:
+    """``(H, W)`` bool mask drawn on photo ``name`` -> the same mask on its undistorted (pinhole) image."""
+    return _remap(mask.astype(np.uint8), und.maps[und.lens_of[name]], nearest=True) > 0
 
 
 def _remap(img: np.ndarray, maps: tuple[np.ndarray, np.ndarray], nearest: bool = False, border: float = 0) -> np.ndarray:
@@ -526,6 +556,7 @@ def _write_undistorted(decoded: DecodeArtifacts, posed: Posed, und: UndistortMap
         "by": "poses stage", "max_shift_px": und.max_shift_px,
         "note": "decoded images resampled (bilinear) to the pinhole cameras of cameras.json; pixels outside the "
         "original photo are 0 and marked clipped",
+        "lenses": und.lenses, "lens_of": {n: und.lens_of[n] for n in posed.names},
     }
     write_json(folder / "decode.json", meta)
 
