@@ -244,6 +244,30 @@ def test_torus_capture_registers_every_view_accurately(sfm_torus_capture, sfm_to
     assert err["object_centre_offset"] <= 0.02, err
 
 
+def test_masks_of_any_encoding_give_the_same_sphere(tiny_capture, tiny_decode, tmp_path):
+    """0/1 and alpha-channel masks (as the masks stage reads them) bound the object like 0/255 ones."""
+    from pipeline.imageio import read_image, write_png
+
+    shutil.copy(tiny_capture / "ground_truth" / "cameras.json", tmp_path / "cameras.json")
+    capture = tmp_path
+    truth = tiny_capture / "ground_truth" / "masks"
+    spheres = {}
+    for encoding in ("0-255", "0-1", "alpha"):
+        folder = tmp_path / f"masks_{encoding}"
+        folder.mkdir()
+        for f in truth.glob("*.png"):
+            m = read_image(f) > 127
+            img = {"0-255": m.astype(np.uint8) * 255, "0-1": m.astype(np.uint8),
+                   "alpha": np.dstack([np.full(m.shape + (3,), 200, np.uint8), m.astype(np.uint8) * 255])}[encoding]
+            write_png(folder / f.name, img)
+        result = run(capture, tiny_decode, tmp_path / f"poses_{encoding}", masks_dir=folder)
+        assert result.sphere.method == "masks", encoding
+        spheres[encoding] = (np.asarray(result.sphere.center), result.sphere.radius)
+    for encoding in ("0-1", "alpha"):
+        np.testing.assert_allclose(spheres[encoding][0], spheres["0-255"][0], atol=1e-9, err_msg=encoding)
+        assert spheres[encoding][1] == pytest.approx(spheres["0-255"][1]), encoding
+
+
 @pytest.mark.slow
 def test_masks_ignore_the_object_and_give_its_sphere(sfm_sphere_capture, sfm_sphere_decode, tmp_path):
     """With object masks the sphere is the masks' visual hull: centre and radius close to the truth."""

@@ -225,16 +225,10 @@ def _mask_files(masks_dir: Path | None, capture_dir: Path, names: list[str],
 
 
 def _read_mask(path: Path, size: tuple[int, int]) -> np.ndarray:
-    """``(H, W)`` bool, True on the object, at ``size`` (width, height)."""
-    import cv2
+    """``(H, W)`` bool, True on the object, at ``size`` (width, height): any encoding the masks stage reads."""
+    from .masks import read_user_mask
 
-    from ..imageio import read_image
-
-    m = read_image(path)
-    m = m[..., 0] if m.ndim == 3 else m
-    if m.shape != (size[1], size[0]):
-        m = cv2.resize(m, size, interpolation=cv2.INTER_NEAREST)
-    return m > (np.iinfo(m.dtype).max / 2 if m.dtype.kind == "u" else 0.5)
+    return read_user_mask(path, size)
 
 
 def _hull_masks(files: dict[str, Path], posed: Posed, und: UndistortMaps | None, size: tuple[int, int],
