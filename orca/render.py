@@ -79,12 +79,21 @@ def fresnel_dielectric(cos_theta: torch.Tensor, ior: float) -> torch.Tensor:
     return 0.5 * (rs.square() + rp.square())
 
 
-def environment_edges(spec: RenderSpec, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
-    """``(env_samples + 1,)`` coarse distances past the start of a cone, log-spaced (near things get the
-    samples they need, far walls still get some), starting exactly at 0."""
-    s = torch.linspace(0, 1, spec.env_samples + 1, dtype=dtype, device=device)
+def environment_edges(spec: RenderSpec, m: int, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
+    """``(m, env_samples + 1)`` coarse distances past the start of ``m`` cones, log-spaced (near things get
+    the samples they need, far walls still get some), starting exactly at 0.
+
+    Unless ``spec.deterministic``, each cone's inner edges are jittered within their own bin (stratified, as
+    NeRF's coarse samples): with fixed edges every training ray of a camera samples the same shells, and
+    the field learns density between them that those rays never see but any other viewpoint does (floaters).
+    """
+    n = spec.env_samples
+    s = torch.linspace(0, 1, n + 1, dtype=dtype, device=device).expand(m, -1)
+    if not spec.deterministic:
+        jitter = (torch.rand(m, n - 1, dtype=dtype, device=device) - 0.5) / n
+        s = torch.cat([s[:, :1], s[:, 1:-1] + jitter, s[:, -1:]], dim=-1)
     u = torch.exp(math.log(spec.env_near) + s * (math.log(spec.env_far) - math.log(spec.env_near)))
-    return torch.cat([torch.zeros_like(u[:1]), u[1:]])
+    return torch.cat([torch.zeros_like(u[:, :1]), u[:, 1:]], dim=-1)
 
 
 def normalized_distance(u: torch.Tensor, spec: RenderSpec) -> torch.Tensor:
@@ -137,7 +146,7 @@ def render_environment_along(
         zero weights.
     """
     m = apex.shape[0]
-    u = environment_edges(spec, apex.dtype, apex.device).expand(m, -1)
+    u = environment_edges(spec, m, apex.dtype, apex.device)
     if env.directional:  # a 2D map: no depth, nothing along the cone to weigh
         rgb = env.radiance_at_infinity(axis, radius_growth)
         depth = torch.full_like(radius_growth, math.inf)

@@ -124,3 +124,49 @@ def test_coarse_to_fine_cone_sampling_finds_the_walls_depth():
         torch.testing.assert_close(rgb, torch.full_like(rgb, 0.5), atol=1e-3, rtol=0)  # the wall, fully opaque
         errors[fine] = ((depth - truth).abs() / truth).mean().item()
     assert errors[16] < 0.06 and errors[16] < 0.15 * errors[0], errors  # measured: 54 % -> 4.4 %
+
+
+class _Slab(torch.nn.Module):
+    """A thin dense slab (a floater) in front of an opaque wall; the wall is grey, the slab white."""
+
+    directional = False
+
+    def __init__(self, lo: float, hi: float, wall: float):
+        super().__init__()
+        self.lo, self.hi, self.wall = lo, hi, wall
+
+    def forward(self, means, variances, dirs):
+        x = means[..., 0]
+        slab = (x > self.lo) & (x < self.hi)
+        density = torch.where(slab | (x > self.wall), 1e4, 0.0)
+        rgb = torch.where(slab[..., None], 1.0, 0.5).expand(*means.shape[:-1], 3)
+        return density, rgb
+
+
+def test_training_cones_jitter_their_coarse_edges_so_no_space_goes_unseen():
+    """Fixed edges sample the same shells on every training ray: a floater between two shells is never seen
+    (and so never corrected) by that camera. Stratified edges see it on some rays."""
+    from orca.render import environment_edges, render_environment_along
+
+    from orca.frustum import conical_frustum_gaussian
+
+    train = RenderSpec(env_samples=16, env_fine=0)
+    evaluate = RenderSpec(env_samples=16, env_fine=0, deterministic=True)
+    cpu = torch.device("cpu")
+    fixed = environment_edges(evaluate, 4, torch.float32, cpu)
+    assert torch.equal(fixed[0], fixed[1])
+    u = environment_edges(train, 4096, torch.float32, cpu)
+    assert (u[:, 1:] > u[:, :-1]).all() and u[:, 0].eq(0).all() and torch.allclose(u[:, -1], fixed[0, -1])
+    assert not torch.equal(u[0], u[1])
+    # a slab between two neighbouring frustum means of the fixed edges
+    n = 512
+    apex, axis, radius = torch.zeros(n, 3), torch.tensor([[1.0, 0.0, 0.0]]).expand(n, 3), torch.full((n,), 1e-4)
+    means = conical_frustum_gaussian(apex[:1], axis[:1], radius[:1], fixed[:1, :-1], fixed[:1, 1:])[0][0, :, 0]
+    k = int(torch.searchsorted(means.contiguous(), torch.tensor(3.0)))
+    gap = means[k] - means[k - 1]
+    slab = _Slab(means[k - 1].item() + 0.1 * gap.item(), means[k].item() - 0.1 * gap.item(), wall=60.0)
+    args = (slab, apex, axis, radius, torch.zeros(n))
+    seen_fixed = render_environment_along(*args, evaluate)[0]
+    seen_jittered = render_environment_along(*args, train)[0]
+    assert (seen_fixed[:, 0] - 0.5).abs().max() < 1e-3, "fixed edges never see the slab"
+    assert (seen_jittered[:, 0] > 0.9).float().mean() > 0.1, "jittered edges see it on some rays"
