@@ -103,7 +103,7 @@ class LossWeights:
     eikonal: float = 0.1
     orientation: float = 1e-3
     distortion: float = 1e-3
-    background: float = 0.5  # background pixels supervise the environment field directly (beyond the paper)
+    background: float = 0.1  # background pixels supervise the environment field directly (beyond the paper)
     clipped_excess: float = 0.1  # clipped pixels: weight of a prediction's excess over the recorded value
     smoothness: float = 0.0  # normals at the surface vs a small random step away (beyond the paper)
     smoothness_step: float = 0.01  # the step's standard deviation, in object radii

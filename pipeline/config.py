@@ -207,7 +207,10 @@ class LossConfig(StrictModel):
     eikonal: float = Field(0.1, ge=0)
     orientation: float = Field(1e-3, ge=0)
     distortion: float = Field(1e-3, ge=0)
-    background: float = Field(0.5, ge=0, description="background pixels supervise the environment field")
+    background: float = Field(
+        0.1, ge=0, description="background pixels supervise the environment field (beyond the paper); weighed low "
+        "so the reflections, the only view of the props' inner sides, are not drowned out (docs/method.md)"
+    )
     clipped_excess: float = Field(
         0.1, ge=0, le=1, description="clipped (saturated) pixels bound the prediction from below; above, this weak "
         "pull toward the recorded value keeps a light of unrecorded brightness from blooming past its edges"
