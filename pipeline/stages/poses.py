@@ -58,6 +58,7 @@ from ..artifacts import stage_dir
 from ..cameras import Camera, CameraSet, load_cameras, save_cameras
 from ..config import PosesConfig, add_config_arguments, config_from_arguments
 from ..errors import InputError
+from .masks import read_user_mask  # masks as the masks stage reads them: any common encoding
 
 if TYPE_CHECKING:
     import pycolmap
@@ -224,13 +225,6 @@ def _mask_files(masks_dir: Path | None, capture_dir: Path, names: list[str],
     return {n: masks_dir / f"{n}.png" for n in names}
 
 
-def _read_mask(path: Path, size: tuple[int, int]) -> np.ndarray:
-    """``(H, W)`` bool, True on the object, at ``size`` (width, height): any encoding the masks stage reads."""
-    from .masks import read_user_mask
-
-    return read_user_mask(path, size)
-
-
 def _hull_masks(files: dict[str, Path], posed: Posed, und: UndistortMaps | None, size: tuple[int, int],
                 max_side: int = 640) -> tuple[list[np.ndarray], float]:
     """The posed photos' masks for the visual hull (undistorted like the images), reduced so the longest side is
@@ -241,7 +235,7 @@ def _hull_masks(files: dict[str, Path], posed: Posed, und: UndistortMaps | None,
     small = (max(1, round(size[0] * scale)), max(1, round(size[1] * scale)))
     out = []
     for n in posed.names:
-        m = _read_mask(files[n], size)
+        m = read_user_mask(files[n], size)
         if und is not None:
             m = undistort_mask(m, und, n)
         m = m.astype(np.uint8)
@@ -467,6 +461,16 @@ def undistort_map(camera: Any) -> tuple[np.ndarray, np.ndarray, float]:
     return (src[..., 0] - 0.5).astype(np.float32), (src[..., 1] - 0.5).astype(np.float32), shift
 
 
+def _lens_maps(cams: list[Any]) -> tuple[list[tuple[np.ndarray, np.ndarray]], float]:
+    """:func:`undistort_map` of each lens, and the largest shift among them (px)."""
+    maps, worst = [], 0.0
+    for c in cams:
+        mx, my, shift = undistort_map(c)
+        maps.append((mx, my))
+        worst = max(worst, shift)
+    return maps, worst
+
+
 def _undistortion(posed: Posed, config: PosesConfig) -> UndistortMaps | None:
     """Maps for every distinct distorted lens, or None when no lens shifts a pixel by more than the threshold."""
     keys: dict[tuple, int] = {}
@@ -478,11 +482,7 @@ def _undistortion(posed: Posed, config: PosesConfig) -> UndistortMaps | None:
             keys[key] = len(cams)
             cams.append(c)
         lens_of[n] = keys[key]
-    maps, worst = [], 0.0
-    for c in cams:
-        mx, my, shift = undistort_map(c)
-        maps.append((mx, my))
-        worst = max(worst, shift)
+    maps, worst = _lens_maps(cams)
     posed.stats["distortion_max_shift_px"] = worst
     if worst <= config.undistort_threshold_px:
         return None
@@ -504,12 +504,9 @@ def recorded_undistortion(decoded: DecodeArtifacts) -> UndistortMaps | None:
     if "lenses" not in record:
         raise InputError("this undistorted folder does not record its lenses (made by an older version)",
                          decoded.folder / "decode.json", fix="rerun `orca poses` (or snakemake --forcerun poses)")
-    maps, worst = [], 0.0
-    for lens in record["lenses"]:
-        cam = pycolmap.Camera(model=lens["model"], width=lens["width"], height=lens["height"], params=lens["params"])
-        mx, my, shift = undistort_map(cam)
-        maps.append((mx, my))
-        worst = max(worst, shift)
+    cams = [pycolmap.Camera(model=lens["model"], width=lens["width"], height=lens["height"], params=lens["params"])
+            for lens in record["lenses"]]
+    maps, worst = _lens_maps(cams)
     return UndistortMaps(maps, dict(record["lens_of"]), worst, list(record["lenses"]))
 
 
@@ -566,7 +563,7 @@ def _write_feature_masks(files: dict[str, Path], size: tuple[int, int], folder: 
     r = config.mask_dilate_px
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)) if r else None
     for n, path in files.items():
-        obj = _read_mask(path, size).astype(np.uint8)
+        obj = read_user_mask(path, size).astype(np.uint8)
         if kernel is not None:
             obj = cv2.dilate(obj, kernel)
         imageio.write_png(folder / f"{colmap_name(n)}.png", np.where(obj > 0, 0, 255).astype(np.uint8))
