@@ -58,7 +58,7 @@ from ..artifacts import stage_dir
 from ..cameras import Camera, CameraSet, load_cameras, save_cameras
 from ..config import PosesConfig, add_config_arguments, config_from_arguments
 from ..errors import InputError
-from .masks import read_user_mask  # masks as the masks stage reads them: any common encoding
+from .masks import read_user_mask
 
 if TYPE_CHECKING:
     import pycolmap
