@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import torch
@@ -43,10 +43,19 @@ class RenderSpec:
     curvature_eps: float = 2e-3  # finite-difference step for the mean curvature at cone samples
     env_samples: int = 48  # coarse samples along each cone (log-spaced) ...
     env_fine: int = 0  # ... plus this many drawn from the coarse weights (coarse-to-fine; 0: one pass)
+    env_fine_render: int | None = None  # env_fine when a trained model renders (None: env_fine); see for_rendering
     env_near: float = 1e-2  # first environment sample past the surface (normalized units)
     env_far: float = 1e3  # the room may be far; the contraction keeps this finite
     ior: float = 1.5  # dielectric coating (Fresnel)
     deterministic: bool = False
+
+    def for_rendering(self) -> RenderSpec:
+        """The spec a trained model renders with: deterministic (a view rendered twice is the same image) and
+        ``env_fine_render`` fine samples along each cone. More than training's count: training draws new
+        random samples every step, a rendered view has one fixed set, and too few of them step through a
+        thin prop to the wall behind it."""
+        fine = self.env_fine if self.env_fine_render is None else self.env_fine_render
+        return replace(self, deterministic=True, env_fine=fine)
 
 
 class RayOutputs(NamedTuple):

@@ -276,6 +276,10 @@ class TrainConfig(StrictModel):
     )
     env_samples: int = Field(48, ge=4, description="coarse samples along each virtual cone (log-spaced)")
     env_fine: int = Field(32, ge=0, description="more samples from the coarse pass's weights (0: one pass)")
+    env_fine_render: int = Field(
+        128, ge=0, description="env_fine when a trained model renders (evaluate, export, render): one fixed set of "
+        "samples per view, where training draws new ones every step; too few step through thin props"
+    )
     env_near: float = Field(0.05, gt=0, description="first environment sample past a cone's start (object radii)")
     env_far: float = Field(100.0, gt=0, description="last environment sample (object radii; the contraction keeps it finite)")
     cone_samples: int = Field(2, ge=1, description="top-weight primary samples that cast virtual cones")
@@ -371,7 +375,7 @@ PRESETS: dict[str, dict[str, Any]] = {
             "preview_every": 500, "grid_levels": 8, "grid_log2_table": 17, "grid_max_resolution": 128,
             "texture_levels": 8, "texture_log2_table": 17, "texture_max_resolution": 512,
             "env_grid_log2_table": 17, "n_coarse": 24, "n_fine": 8, "upsample_steps": 2, "band_samples": 16,
-            "env_samples": 24, "env_fine": 24, "background_rays": 768,
+            "env_samples": 24, "env_fine": 24, "env_fine_render": 96, "background_rays": 768,
             "cone_samples": 1,
         },
         "mesh": {"resolution": 128},

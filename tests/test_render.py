@@ -170,3 +170,13 @@ def test_training_cones_jitter_their_coarse_edges_so_no_space_goes_unseen():
     seen_jittered = render_environment_along(*args, train)[0]
     assert (seen_fixed[:, 0] - 0.5).abs().max() < 1e-3, "fixed edges never see the slab"
     assert (seen_jittered[:, 0] > 0.9).float().mean() > 0.1, "jittered edges see it on some rays"
+
+
+def test_a_trained_model_renders_deterministically_with_its_own_fine_samples():
+    from dataclasses import replace
+
+    spec = RenderSpec(env_samples=16, env_fine=8, env_fine_render=32)
+    rendering = spec.for_rendering()
+    assert rendering.deterministic and rendering.env_fine == 32
+    assert replace(rendering, deterministic=False, env_fine=8) == spec  # nothing else changes
+    assert RenderSpec(env_fine=8).for_rendering().env_fine == 8  # no render count: training's

@@ -84,3 +84,10 @@ def test_render_refuses_a_downscale_larger_than_a_camera(setup, tmp_path):
     with pytest.raises(InputError, match="smaller than the downscale"):
         run_render(train, path, tmp_path / "x", downscale=13, device="cpu")
     assert not (tmp_path / "x").exists()
+
+
+def test_the_renderer_takes_the_trained_configs_render_sample_count(setup):
+    from pipeline.stages.render import load_renderer
+
+    model = load_renderer(setup[0], "cpu")
+    assert model.spec.render.deterministic and model.spec.render.env_fine == 2  # train.env_fine_render (tiny_model)

@@ -41,14 +41,15 @@ def _camera_tensors(cam: Camera, downscale: int, device):
 
 
 def load_renderer(train_dir: Path, device: str = "auto"):
-    """The trained model of ``train_dir`` ready to render: eval mode, deterministic sampling (a view rendered
-    twice, or by two stages, is the same image; training draws random quantiles, rendering must not)."""
+    """The trained model of ``train_dir`` ready to render: eval mode, the render spec's ``for_rendering`` (a
+    view rendered twice, or by two stages, is the same image; training draws random quantiles, rendering
+    must not)."""
     from dataclasses import replace
 
     from .train import load_model, resolve_device
 
     model = load_model(train_dir, str(resolve_device(device)))
-    model.spec = replace(model.spec, render=replace(model.spec.render, deterministic=True))
+    model.spec = replace(model.spec, render=model.spec.render.for_rendering())
     return model
 
 

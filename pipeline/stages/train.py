@@ -134,7 +134,9 @@ def model_spec(cfg: TrainConfig):
         render=RenderSpec(
             object_radius=cfg.scene_radius, n_coarse=cfg.n_coarse, n_fine=cfg.n_fine, upsample_steps=cfg.upsample_steps,
             band_samples=cfg.band_samples,
-            env_samples=cfg.env_samples, env_fine=cfg.env_fine, env_near=cfg.env_near, env_far=cfg.env_far, cone_samples=cfg.cone_samples, cone_method=cfg.cone_method, ior=cfg.ior,
+            env_samples=cfg.env_samples, env_fine=cfg.env_fine, env_fine_render=cfg.env_fine_render,
+            env_near=cfg.env_near, env_far=cfg.env_far, cone_samples=cfg.cone_samples, cone_method=cfg.cone_method,
+            ior=cfg.ior,
         ),
         beta_init=cfg.beta_init, beta_final=cfg.beta_final, beta_anneal=cfg.beta_anneal,
         sdf_levels_start=cfg.sdf_levels_start, sdf_levels_full=cfg.sdf_levels_full,
