@@ -39,6 +39,10 @@ class ModelSpec:
     beta_anneal: float = 0.5  # ... reached at this p; the learned β can always go lower
     sdf_levels_start: int = 4  # coarse-to-fine: SDF hash-grid levels active at p = 0 ...
     sdf_levels_full: float = 0.3  # ... all levels active from this p on
+    # Background rays (camera pixels off the object) start this fraction of the way from their camera to the
+    # object's centre: with samples right in front of the lens, the field explains each photo's background
+    # with a floater before its own camera (invisible to the others) instead of learning the room.
+    background_near: float = 0.0
 
 
 class OrcaModel(nn.Module):
@@ -77,13 +81,16 @@ class OrcaModel(nn.Module):
         )
 
     def environment(
-        self, origins: torch.Tensor, dirs: torch.Tensor, radii: torch.Tensor
+        self, origins: torch.Tensor, dirs: torch.Tensor, radii: torch.Tensor, near: torch.Tensor | None = None
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """Radiance ``(N, 3)`` and median ray depth ``(N,)`` of the environment field alone (object absent),
-        seen by ordinary camera cones from ``origins``. The object's inside is empty (see ``solid``)."""
+        seen by ordinary camera cones from ``origins``, empty before ``near`` ``(N,)`` (default 0). The
+        object's inside is empty (see ``solid``)."""
+        near = torch.zeros_like(radii) if near is None else near
         rgb, depth, _, _ = render_environment_along(
-            self.env_field, origins, dirs, radii, torch.zeros_like(radii), self.spec.render, self.solid
+            self.env_field, origins, dirs, radii, near, self.spec.render, self.solid
         )
+        depth = near + depth
         return rgb, depth
 
     @torch.no_grad()
@@ -162,7 +169,8 @@ def objective(
             rays.append((background.origins, background.dirs, background.radii, background.rgb, background.valid))
         origins, dirs, radii, rgb, valid = (torch.cat(parts) for parts in zip(*rays))
         if origins.shape[0]:
-            env_rgb, _ = model.environment(origins, dirs, radii)
+            near = model.spec.background_near * origins.norm(dim=-1)  # the object's centre is the origin
+            env_rgb, _ = model.environment(origins, dirs, radii, near)
             terms["background"] = photometric_loss(env_rgb, rgb, valid, ~valid, weights.clipped_excess)
     total = sum(getattr(weights, k) * v for k, v in terms.items())
     return total, {k: v.detach() for k, v in terms.items()}, out

@@ -232,6 +232,11 @@ class TrainConfig(StrictModel):
     background_rays: int = Field(
         2048, ge=0, description="extra off-object rays per iteration for the environment field (cheap: no SDF)"
     )
+    background_near: float = Field(
+        0.25, ge=0, lt=1, description="background rays start this fraction of the way from their camera to the "
+        "object's centre: with samples right before the lens, each photo's background is explained by a floater "
+        "in front of its own camera, unseen by the others, instead of by the room (docs/method.md)"
+    )
     checkpoint_every: int = Field(500, ge=1)
     preview_every: int = Field(1000, ge=1)
     preview_downscale: int = Field(4, ge=1)

@@ -148,3 +148,37 @@ def test_environment_views_from_inside_the_object_start_at_its_surface():
                                                      model.spec.render)
     assert bool((depth > 0.4).all()), depth.min()
     assert bool((unmasked < 0.3).all()), unmasked.max()
+
+
+class _FloaterBeforeTheLens(torch.nn.Module):
+    """White fog within 0.5 of a camera at x = -4, a grey wall at x > 3: the colour a floater gives a photo's
+    background, unseen by any other camera."""
+
+    directional = False
+
+    def forward(self, means, variances, dirs):
+        x = means[..., 0]
+        fog = x < -3.5
+        density = torch.where(fog | (x > 3.0), 1e3, 0.0)
+        return density, torch.where(fog[..., None], 1.0, 0.5).expand(*means.shape[:-1], 3)
+
+
+def test_background_rays_start_part_way_to_the_object_so_a_floater_at_the_lens_explains_nothing():
+    from dataclasses import replace
+
+    n = 32
+    g = torch.Generator().manual_seed(0)
+    dirs = torch.nn.functional.normalize(torch.tensor([1.0, 0.6, 0.0]) + 0.05 * torch.randn(n, 3, generator=g), dim=-1)
+    grey = torch.full((n, 3), 0.5)
+    batch = Batch(torch.tensor([-4.0, 0.0, 0.0]).expand(n, 3), dirs, torch.full((n,), 1e-3), grey, torch.zeros(n),
+                  torch.ones(n, dtype=torch.bool))  # off the object (radius 0.4): background rays only
+    weights = LossWeights(mask=0.0, eikonal=0.0)
+    losses = {}
+    for near in (0.0, 0.25):
+        model = _model()
+        model.spec = replace(model.spec, background_near=near, render=replace(model.spec.render, env_fine=16))
+        model.env_field = _FloaterBeforeTheLens()
+        losses[near] = objective(model, batch, weights, "mask")[1]["background"].item()
+        _, depth = model.environment(batch.origins, batch.dirs, batch.radii, torch.full((n,), 4.0 * near))
+        assert bool((depth > 4.0 * near).all())  # ray depth from the camera, not from the near bound
+    assert losses[0.0] > 0.1 and losses[0.25] < 0.01, losses  # white fog vs the grey wall (0.001: the loss floor)

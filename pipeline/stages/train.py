@@ -140,6 +140,7 @@ def model_spec(cfg: TrainConfig):
         ),
         beta_init=cfg.beta_init, beta_final=cfg.beta_final, beta_anneal=cfg.beta_anneal,
         sdf_levels_start=cfg.sdf_levels_start, sdf_levels_full=cfg.sdf_levels_full,
+        background_near=cfg.background_near,
     )
 
 
