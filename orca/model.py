@@ -39,8 +39,8 @@ class ModelSpec:
     beta_anneal: float = 0.5  # ... reached at this p; the learned β can always go lower
     sdf_levels_start: int = 4  # coarse-to-fine: SDF hash-grid levels active at p = 0 ...
     sdf_levels_full: float = 0.3  # ... all levels active from this p on
-    # Background rays (camera pixels off the object) start this fraction of the way from their camera to the
-    # object's centre: with samples right in front of the lens, the field explains each photo's background
+    # Background rays (camera pixels off the object) may start this fraction of the way from their camera to
+    # the object's centre: with samples right in front of the lens, the field can explain a photo's background
     # with a floater before its own camera (invisible to the others) instead of learning the room.
     background_near: float = 0.0
 

@@ -233,9 +233,9 @@ class TrainConfig(StrictModel):
         2048, ge=0, description="extra off-object rays per iteration for the environment field (cheap: no SDF)"
     )
     background_near: float = Field(
-        0.25, ge=0, lt=1, description="background rays start this fraction of the way from their camera to the "
-        "object's centre: with samples right before the lens, each photo's background is explained by a floater "
-        "in front of its own camera, unseen by the others, instead of by the room (docs/method.md)"
+        0.0, ge=0, lt=1, description="background rays start this fraction of the way from their camera to the "
+        "object's centre (no samples right before the lens, where floaters explain a photo's background); off "
+        "by default: it helped an environment-only fit but not joint training (docs/method.md)"
     )
     checkpoint_every: int = Field(500, ge=1)
     preview_every: int = Field(1000, ge=1)
