@@ -10,6 +10,9 @@ notebook calls), each writing one folder under results/<capture>/ atomically.
 A synthetic capture (one with ground_truth/) is also evaluated against its ground truth. Last, every capture
 gets results/<capture>/report/report.html: one self-contained page of every stage's pictures and figures.
 
+Each rule's params hold a hash of the config values its stage runs with: changing one (an upgrade that changes
+a default included) reruns that stage and what follows it.
+
 Config keys (all optional): captures (list of folder names under captures_dir), captures_dir, results_dir,
 preset (fast | standard | paper), set (a list of config overrides, e.g. '["train.iterations=500"]').
 """
@@ -18,7 +21,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from pipeline.config import PRESETS
+from pipeline.config import PRESETS, stage_config_digest
 from pipeline.stages.decode import find_photos
 
 # The `orca` CLI of the environment Snakemake itself runs in (no need for it to be on PATH).
@@ -54,6 +57,16 @@ def capture_config(wildcards):
     """The capture's own capture.yaml, when it has one: editing it reruns the stages."""
     path = CAPTURES_DIR / wildcards.capture / "capture.yaml"
     return [str(path)] if path.exists() else []
+
+
+def config_digest(section, reads_capture_yaml=True):
+    """The rule's params: a hash of the values its stage runs with, every default filled in. Snakemake reruns
+    a rule whose params changed, so an upgrade that changes a default (or an edited preset) reruns the stages
+    it touches, which neither the files nor the command line would show."""
+    def digest(wildcards):
+        capture_yaml = CAPTURES_DIR / wildcards.capture / "capture.yaml" if reads_capture_yaml else None
+        return stage_config_digest(section, PRESET, OVERRIDES, capture_yaml)
+    return digest
 
 
 def user_masks(wildcards):
@@ -104,6 +117,8 @@ rule decode:
     input:
         photos=lambda wc: [str(p) for p in find_photos(CAPTURES_DIR / wc.capture)[1]],
         capture_yaml=capture_config,
+    params:
+        config=config_digest("decode"),
     output:
         directory(RESULTS_DIR / "{capture}" / "decode"),
     log:
@@ -119,6 +134,8 @@ rule poses:
         unpack(poses_inputs),
         decode=RESULTS_DIR / "{capture}" / "decode",
         capture_yaml=capture_config,
+    params:
+        config=config_digest("poses"),
     output:
         directory(RESULTS_DIR / "{capture}" / "poses"),
     log:
@@ -138,6 +155,8 @@ rule masks:
         decode=RESULTS_DIR / "{capture}" / "decode",
         poses=RESULTS_DIR / "{capture}" / "poses",
         capture_yaml=capture_config,
+    params:
+        config=config_digest("masks"),
     output:
         directory(RESULTS_DIR / "{capture}" / "masks"),
     log:
@@ -158,6 +177,8 @@ rule train:
         poses=RESULTS_DIR / "{capture}" / "poses",
         masks=RESULTS_DIR / "{capture}" / "masks",
         capture_yaml=capture_config,
+    params:
+        config=config_digest("train"),
     output:
         directory(RESULTS_DIR / "{capture}" / "train"),
     log:
@@ -175,6 +196,8 @@ rule mesh:
     input:
         train=RESULTS_DIR / "{capture}" / "train",
         masks=RESULTS_DIR / "{capture}" / "masks",
+    params:
+        config=config_digest("mesh", reads_capture_yaml=False),
     output:
         directory(RESULTS_DIR / "{capture}" / "mesh"),
     log:
@@ -190,6 +213,8 @@ rule export:
     input:
         train=RESULTS_DIR / "{capture}" / "train",
         masks=RESULTS_DIR / "{capture}" / "masks",
+    params:
+        config=config_digest("export", reads_capture_yaml=False),
     output:
         directory(RESULTS_DIR / "{capture}" / "export"),
     log:

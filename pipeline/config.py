@@ -7,6 +7,8 @@ Unknown keys and bad values are errors (pydantic ``extra="forbid"``), never sile
 from __future__ import annotations
 
 import copy
+import hashlib
+import json
 from pathlib import Path
 from typing import Any, Literal
 
@@ -474,6 +476,18 @@ def add_config_arguments(parser: Any) -> None:
 
 def config_from_arguments(args: Any, section: str, capture_yaml: Path | None = None) -> PipelineConfig:
     """Load the config from parsed ``add_config_arguments`` options; bare keys belong to ``section``."""
+    return stage_config(section, args.preset, args.config, args.overrides, capture_yaml)
+
+
+def stage_config(
+    section: str,
+    preset: str | None = None,
+    config_file: Path | None = None,
+    overrides: list[str] | tuple[str, ...] = (),
+    capture_yaml: Path | None = None,
+) -> PipelineConfig:
+    """The config a stage's CLI resolves: the capture's ``capture.yaml`` (when it exists), ``config_file``,
+    then ``overrides``, whose bare keys (``iterations=500``) belong to ``section``."""
     fields = type(getattr(PipelineConfig(), section)).model_fields
 
     def qualify(item: str) -> str:
@@ -484,7 +498,24 @@ def config_from_arguments(args: Any, section: str, capture_yaml: Path | None = N
 
     return load_config(
         capture_yaml if capture_yaml is not None and capture_yaml.is_file() else None,
-        args.config,
-        preset=args.preset,
-        overrides=[qualify(o) for o in args.overrides],
+        config_file,
+        preset=preset,
+        overrides=[qualify(o) for o in overrides],
     )
+
+
+def stage_config_digest(
+    section: str,
+    preset: str | None = None,
+    overrides: list[str] | tuple[str, ...] = (),
+    capture_yaml: Path | None = None,
+) -> str:
+    """A short hash of the stage's section of :func:`stage_config`, every default filled in.
+
+    The Snakefile records it as each rule's ``params``: Snakemake reruns a rule whose params changed, so a
+    stage reruns when the values it runs with change, even when no file or command line did (a default
+    changed by an upgrade of this package, a preset edited).
+    """
+    values = getattr(stage_config(section, preset, None, overrides, capture_yaml), section)
+    text = json.dumps(values.model_dump(mode="json"), sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]

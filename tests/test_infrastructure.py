@@ -186,6 +186,25 @@ def test_stage_cli_overrides_may_omit_the_stage_section():
     assert cfg.train.iterations == 7 and cfg.train.losses.background == 0.25 and cfg.mesh.resolution == 64
 
 
+
+
+def test_a_stages_config_digest_follows_its_own_values_only(tmp_path, monkeypatch):
+    from pipeline.config import stage_config_digest
+
+    base = stage_config_digest("train", "fast")
+    assert stage_config_digest("train", "fast", ["iterations=7"]) != base
+    assert stage_config_digest("train", "fast", ["train.iterations=7"]) == stage_config_digest(
+        "train", "fast", ["iterations=7"]
+    ), "a bare key is the stage's own, as on its CLI"
+    assert stage_config_digest("train", "fast", ["mesh.resolution=64"]) == base, "another stage's value"
+    assert stage_config_digest("train", "standard") != base
+    capture_yaml = tmp_path / "capture.yaml"
+    assert stage_config_digest("train", "fast", capture_yaml=capture_yaml) == base, "no capture.yaml: defaults"
+    capture_yaml.write_text("train:\n  ior: 1.9\n")
+    assert stage_config_digest("train", "fast", capture_yaml=capture_yaml) != base
+    # a default changed by an upgrade (no file, no command line) changes it too
+    monkeypatch.setitem(PRESETS["fast"]["train"], "lr", 1e-3)
+    assert stage_config_digest("train", "fast") != base
 # --- CLI ----------------------------------------------------------------------------------------------
 
 
