@@ -23,7 +23,7 @@ from .differential import normalize, normals_and_curvature_fd
 from .fields import EnvironmentField, SDFField
 from .frustum import conical_frustum_gaussian
 from .sampling import ray_sphere_bounds, sample_pdf, surface_band, upsample_to_surface
-from .volume import composite_weights, median_depth, volsdf_density
+from .volume import composite_weights, quantile_depth, volsdf_density
 
 
 @dataclass(frozen=True)
@@ -44,6 +44,7 @@ class RenderSpec:
     env_samples: int = 48  # coarse samples along each cone (log-spaced) ...
     env_fine: int = 0  # ... plus this many drawn from the coarse weights (coarse-to-fine; 0: one pass)
     env_fine_render: int | None = None  # env_fine when a trained model renders (None: env_fine); see for_rendering
+    depth_quantile: float = 0.5  # an environment ray's depth: where its weight reaches this share (0.5: median)
     env_near: float = 1e-2  # first environment sample past the surface (normalized units)
     env_far: float = 1e3  # the room may be far; the contraction keeps this finite
     ior: float = 1.5  # dielectric coating (Fresnel)
@@ -150,7 +151,7 @@ def render_environment_along(
     Args:
         apex, axis: ``(M, 3)``; radius_growth, t_start: ``(M,)``.
     Returns:
-        radiance ``(M, 3)``, median depth past the start ``(M,)`` (:func:`~orca.volume.median_depth`),
+        radiance ``(M, 3)``, depth past the start ``(M,)`` (:func:`~orca.volume.quantile_depth`),
         weights ``(M, E)``, normalized edges ``(M, E + 1)`` (E = env_samples + env_fine). A directional (2D map) field gives infinite depth and
         zero weights.
     """
@@ -171,7 +172,7 @@ def render_environment_along(
     density, radiance = _frustums(env, apex, axis, radius_growth, t_start, u, solid)
     w, _ = composite_weights(density, u)
     rgb = (w[..., None] * radiance).sum(-2)
-    return rgb, median_depth(w, u), w, normalized_distance(u, spec)
+    return rgb, quantile_depth(w, u, spec.depth_quantile), w, normalized_distance(u, spec)
 
 
 def shade_specular(

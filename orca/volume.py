@@ -42,24 +42,26 @@ def composite_weights(density: torch.Tensor, t: torch.Tensor) -> tuple[torch.Ten
     return trans * alpha, torch.exp(-acc[..., -1])
 
 
-def median_depth(weights: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
-    """Where a ray's accumulated weight reaches half its total, interpolated inside that interval.
+def quantile_depth(weights: torch.Tensor, t: torch.Tensor, quantile: float = 0.5) -> torch.Tensor:
+    """Where a ray's accumulated weight reaches ``quantile`` of its total, interpolated inside that interval.
 
     The expected depth ``Σ w t`` is a poor depth map for a radiance field: a few per cent of weight left in
     the far, long intervals (a thin start, a wall not quite opaque) moves it by several times the true
-    depth. The median is the surface the ray mostly sees.
+    depth. The median (``quantile=0.5``) is the surface the ray mostly sees; a lower quantile is the first
+    surface that takes a good part of the weight, which a field that left an opaque surface semi-transparent
+    (seen from few directions, in few pixels) puts at the surface where the median passes through it.
 
     Args:
-        weights: ``(..., S)``; t: ``(..., S + 1)`` increasing edges.
+        weights: ``(..., S)``; t: ``(..., S + 1)`` increasing edges; quantile in (0, 1).
     Returns:
         ``(...)`` depths; the last edge where the weights are all zero.
     """
     cum = torch.cumsum(weights, dim=-1)
-    half = 0.5 * cum[..., -1:]
-    i = torch.searchsorted(cum.contiguous(), half.contiguous()).clamp(max=weights.shape[-1] - 1)
+    level = quantile * cum[..., -1:]
+    i = torch.searchsorted(cum.contiguous(), level.contiguous()).clamp(max=weights.shape[-1] - 1)
     w_i = weights.gather(-1, i)
     before = cum.gather(-1, i) - w_i
-    frac = ((half - before) / w_i.clamp_min(1e-12)).clamp(0, 1)
+    frac = ((level - before) / w_i.clamp_min(1e-12)).clamp(0, 1)
     t0, t1 = t.gather(-1, i), t.gather(-1, i + 1)
     depth = (t0 + frac * (t1 - t0)).squeeze(-1)
     return torch.where(cum[..., -1] > 0, depth, t[..., -1])

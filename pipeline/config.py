@@ -287,6 +287,11 @@ class TrainConfig(StrictModel):
         128, ge=0, description="env_fine when a trained model renders (evaluate, export, render): one fixed set of "
         "samples per view, where training draws new ones every step; too few step through thin props"
     )
+    env_depth_quantile: float = Field(
+        0.3, gt=0, lt=1, description="an environment ray's depth (export, evaluate, render): where its accumulated "
+        "weight reaches this share of the total (0.5: the median); lower reads the first surface that takes a good "
+        "part of it, where a prop left semi-transparent sits (docs/method.md)"
+    )
     env_near: float = Field(0.05, gt=0, description="first environment sample past a cone's start (object radii)")
     env_far: float = Field(100.0, gt=0, description="last environment sample (object radii; the contraction keeps it finite)")
     cone_samples: int = Field(2, ge=1, description="top-weight primary samples that cast virtual cones")

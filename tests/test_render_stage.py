@@ -86,8 +86,9 @@ def test_render_refuses_a_downscale_larger_than_a_camera(setup, tmp_path):
     assert not (tmp_path / "x").exists()
 
 
-def test_the_renderer_takes_the_trained_configs_render_sample_count(setup):
+def test_the_renderer_takes_the_trained_configs_render_settings(setup):
     from pipeline.stages.render import load_renderer
 
     model = load_renderer(setup[0], "cpu")
     assert model.spec.render.deterministic and model.spec.render.env_fine == 2  # train.env_fine_render (tiny_model)
+    assert model.spec.render.depth_quantile == 0.4  # train.env_depth_quantile (tiny_model)

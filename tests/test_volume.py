@@ -62,17 +62,27 @@ def test_distortion_loss_matches_brute_force_and_has_gradients():
 
 
 def test_median_depth_is_the_wall_a_thin_far_tail_does_not_move():
-    from orca.volume import median_depth
+    from orca.volume import quantile_depth
 
     t = torch.tensor([[0.0, 1.0, 2.0, 3.0, 4.0, 100.0]])
     w = torch.tensor([[0.0, 0.0, 0.9, 0.0, 0.1]])  # a wall in [2, 3], 10 % left for the long last interval
     mid = 0.5 * (t[:, 1:] + t[:, :-1])
     assert (w * mid).sum() > 6.0  # the expected depth is more than twice the wall's
-    assert median_depth(w, t).item() == pytest.approx(2.0 + 0.5 / 0.9 * 1.0, abs=1e-5)
+    assert quantile_depth(w, t).item() == pytest.approx(2.0 + 0.5 / 0.9 * 1.0, abs=1e-5)
     uniform = torch.full((1, 5), 0.2)
-    assert median_depth(uniform, t).item() == pytest.approx(2.5, abs=1e-5)  # halfway through the middle interval
-    assert median_depth(torch.zeros(1, 5), t).item() == 100.0  # nothing seen: the far end
+    assert quantile_depth(uniform, t).item() == pytest.approx(2.5, abs=1e-5)  # halfway through the middle interval
+    assert quantile_depth(torch.zeros(1, 5), t).item() == 100.0  # nothing seen: the far end
     batch = torch.rand(4, 7, 5)
     edges = torch.cumsum(torch.rand(4, 7, 6), dim=-1)
-    d = median_depth(batch, edges)
+    d = quantile_depth(batch, edges)
     assert d.shape == (4, 7) and ((d >= edges[..., 0]) & (d <= edges[..., -1])).all()
+
+
+def test_a_lower_depth_quantile_finds_a_semi_transparent_prop_the_median_passes_through():
+    from orca.volume import quantile_depth
+
+    t = torch.tensor([[0.0, 2.0, 3.0, 8.0, 9.0, 100.0]])
+    w = torch.tensor([[0.0, 0.4, 0.0, 0.6, 0.0]])  # a prop in [2, 3] taking 40 %, the wall in [8, 9] the rest
+    assert quantile_depth(w, t).item() == pytest.approx(8.0 + 0.1 / 0.6, abs=1e-5)  # the median: in the wall
+    assert quantile_depth(w, t, 0.3).item() == pytest.approx(2.0 + 0.3 / 0.4, abs=1e-5)  # the prop
+    assert quantile_depth(w * 5.0, t, 0.3).item() == pytest.approx(2.75, abs=1e-5), "a share of the total weight"

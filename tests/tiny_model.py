@@ -13,7 +13,7 @@ TINY_MODEL = [
     "train.grid_levels=4", "train.grid_log2_table=10", "train.texture_levels=2", "train.texture_log2_table=10",
     "train.env_grid_log2_table=10", "train.sdf_hidden=16", "train.env_hidden=16", "train.n_coarse=8",
     "train.n_fine=4", "train.upsample_steps=1", "train.band_samples=4", "train.env_samples=6", "train.env_fine=0",
-    "train.env_fine_render=2", "train.device=cpu",
+    "train.env_fine_render=2", "train.env_depth_quantile=0.4", "train.device=cpu",
 ]
 
 

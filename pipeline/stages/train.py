@@ -135,6 +135,7 @@ def model_spec(cfg: TrainConfig):
             object_radius=cfg.scene_radius, n_coarse=cfg.n_coarse, n_fine=cfg.n_fine, upsample_steps=cfg.upsample_steps,
             band_samples=cfg.band_samples,
             env_samples=cfg.env_samples, env_fine=cfg.env_fine, env_fine_render=cfg.env_fine_render,
+            depth_quantile=cfg.env_depth_quantile,
             env_near=cfg.env_near, env_far=cfg.env_far, cone_samples=cfg.cone_samples, cone_method=cfg.cone_method,
             ior=cfg.ior,
         ),
