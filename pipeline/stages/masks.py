@@ -319,7 +319,7 @@ def run_masks(
             task = bar.add_task("write masks", total=len(names))
             for i, (cam, view) in enumerate(zip(cameras.cameras, views)):
                 photo = decoded.srgb(cam.name)
-                if cam.name in user_files:
+                if cam.name in user_files:  # read again, not kept from loading: one full-size mask in memory
                     full = user_mask(user_files[cam.name], cam, undistortion)
                 else:
                     full = full_size_mask(final[i], photo)
