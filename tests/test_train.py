@@ -84,15 +84,41 @@ def test_a_terminated_orca_train_checkpoints_and_resumes(tiny_capture, tiny_deco
     assert resumed is not None and resumed.iterations == step + 2
 
 
-def test_changed_network_is_not_resumed_silently(tiny_capture, tiny_decode, tmp_path):
+def _steps(folder):
+    return [json.loads(line)["step"] for line in (folder / "metrics.jsonl").read_text().splitlines()]
+
+
+def test_checkpoints_of_another_config_or_other_data_are_set_aside_not_resumed(tiny_capture, tiny_decode, tmp_path):
+    import shutil
+
     gt = tiny_capture / "ground_truth"
     out = tmp_path / "train"
+    ckpts, aside = checkpoint_dir_for(out), tmp_path / "train.checkpoints.superseded"
     run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, _cfg(), max_steps=2)
-    with pytest.raises(InputError, match="sdf_hidden"):
-        run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, _cfg("train.sdf_hidden=32"), max_steps=2)
-    # --restart discards the old checkpoints and trains the new network
-    assert run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, _cfg("train.sdf_hidden=32"),
-                     restart=True, max_steps=2) is None
+    # what only changes the bookkeeping (or the render-time settings) resumes
+    run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, _cfg("train.log_every=2",
+              "train.env_depth_quantile=0.4"), max_steps=2)
+    assert _steps(ckpts) == [1, 2, 4] and not aside.exists()
+    # another network, or another loss weight: the old run is kept aside, the new one starts from zero
+    for change, last_aside in (("train.sdf_hidden=32", "step_0000004.pt"), ("train.losses.eikonal=0.2", "step_0000002.pt")):
+        run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, _cfg(change), max_steps=2)
+        assert _steps(ckpts) == [1, 2], change
+        assert sorted(p.name for p in aside.glob("step_*.pt"))[-1] == last_aside, change
+    # the same config on other masks (one view's mask edited) starts over too
+    masks = tmp_path / "masks"
+    shutil.copytree(gt / "masks", masks)
+    first = sorted(masks.glob("*.png"))[0]
+    from pipeline.imageio import read_image, write_png
+
+    m = read_image(first)
+    m[m.shape[0] // 2] = m.max()  # a line across the view marked object
+    write_png(first, m)
+    run_train(tiny_decode, gt / "cameras.json", masks, out, _cfg("train.losses.eikonal=0.2"), max_steps=3)
+    assert _steps(ckpts) == [1, 2, 3]
+    # --restart discards the checkpoints outright
+    assert run_train(tiny_decode, gt / "cameras.json", masks, out, _cfg("train.losses.eikonal=0.2"),
+                     restart=True, max_steps=1) is None
+    assert _steps(ckpts) == [1]
 
 
 def test_damaged_checkpoint_names_the_file(tmp_path):

@@ -9,6 +9,7 @@ in ``train.checkpoints/`` so an interrupted run (Ctrl-C, a crash, a killed job) 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import logging
 import math
@@ -151,12 +152,13 @@ def loss_weights(cfg: TrainConfig):
     return LossWeights(**cfg.losses.model_dump())
 
 
-# Config keys that change the network's shape: a checkpoint is only resumable if these match.
-_ARCHITECTURE_KEYS = (
-    "sdf_encoding", "sdf_hidden", "sdf_layers", "grid_levels", "grid_log2_table", "grid_max_resolution",
-    "texture_levels", "texture_log2_table", "texture_max_resolution",
-    "env_encoding", "env_hidden", "env_layers", "env_grid_log2_table", "env_view_freqs", "scene_radius",
-)
+# Config keys that do not change what the iterations compute: checkpoints made under other values resume.
+# (`iterations` may change too: a finished run extended, or a time-boxed one cut short, goes on from its last
+# checkpoint, with the learning-rate schedule of the new length from there.)
+_RESUME_NEUTRAL_KEYS = frozenset({
+    "iterations", "checkpoint_every", "preview_every", "preview_downscale", "log_every", "keep_checkpoints",
+    "device", "env_fine_render", "env_depth_quantile",
+})
 
 
 def resolve_device(name: str):
@@ -182,10 +184,11 @@ def _checkpoints(folder: Path) -> list[Path]:
 
 
 def save_checkpoint(
-    folder: Path, step: int, model, optimizer, scheduler, cfg: TrainConfig, keep: int, seconds: float
+    folder: Path, step: int, model, optimizer, scheduler, cfg: TrainConfig, keep: int, seconds: float,
+    identity: dict[str, Any],
 ) -> Path:
     """Write ``step_XXXXXXX.pt`` atomically and drop all but the ``keep`` newest; ``seconds``: training time
-    so far, over every resumed run."""
+    so far, over every resumed run; ``identity``: :func:`training_identity`, checked before resuming."""
     import torch
 
     path = folder / f"step_{step:07d}.pt"
@@ -196,6 +199,7 @@ def save_checkpoint(
         "optimizer": optimizer.state_dict(),
         "scheduler": scheduler.state_dict(),
         "config": cfg.model_dump_json(),
+        "identity": json.dumps(identity),
         "seconds": seconds,
     }
     with atomic_path(path) as tmp:
@@ -228,14 +232,38 @@ def load_weights(model, state: dict[str, Any], path: Path) -> None:
                          "retrain: `orca train ... --restart`") from e
 
 
-def _check_resumable(state: dict[str, Any], cfg: TrainConfig, path: Path) -> None:
-    saved = json.loads(state["config"])
-    changed = [k for k in _ARCHITECTURE_KEYS if saved.get(k) != getattr(cfg, k)]
-    if changed:
-        raise InputError(
-            f"the checkpoint was trained with a different network ({', '.join(changed)} changed)",
-            path, "pass --restart to train the new network from scratch, or restore the old settings",
-        )
+def training_identity(cfg: TrainConfig, data) -> dict[str, Any]:
+    """What a checkpoint's iterations depend on: the config (but the keys of ``_RESUME_NEUTRAL_KEYS``) and a
+    hash of the training data (images, masks, clipped pixels, cameras) as the model sees them."""
+    config = {k: v for k, v in cfg.model_dump(mode="json").items() if k not in _RESUME_NEUTRAL_KEYS}
+    digest = hashlib.sha256()
+    for tensor in (data.images, data.masks, data.valid, data.K, data.c2w):
+        digest.update(str(tuple(tensor.shape)).encode())
+        digest.update(tensor.detach().cpu().contiguous().numpy().tobytes())
+    return {"config": config, "data": digest.hexdigest()}
+
+
+def identity_changes(saved: dict[str, Any] | None, current: dict[str, Any]) -> list[str]:
+    """Why a checkpoint of identity ``saved`` cannot be resumed under ``current`` (empty: it can)."""
+    if not saved:
+        return ["the checkpoint records no config or data (an older version)"]
+    changes = [f"train.{k}" for k in sorted(set(saved["config"]) | set(current["config"]))
+               if saved["config"].get(k) != current["config"].get(k)]
+    if saved.get("data") != current["data"]:
+        changes.append("the images, masks or cameras")
+    return changes
+
+
+def supersede_checkpoints(ckpt_dir: Path, reasons: list[str]) -> Path:
+    """Move a checkpoint folder that may not be resumed aside (replacing an older one there): nothing already
+    computed is lost, and training starts over."""
+    aside = ckpt_dir.with_name(ckpt_dir.name + ".superseded")
+    if aside.exists():
+        shutil.rmtree(aside)
+    ckpt_dir.rename(aside)
+    log.warning("the checkpoints in %s were trained on something else (%s changed): training starts over; "
+                "they are kept in %s", ckpt_dir, ", ".join(reasons), aside)
+    return aside
 
 
 # -------------------------------------------------------------------------------------------- previews
@@ -297,6 +325,7 @@ def run_train(
     n_img, height, width = data.shape
     log.info("train: %d images %dx%d, %d object pixels, device %s, %d iterations", n_img, width, height,
              int(data.masks.sum()), device, cfg.iterations)
+    identity = training_identity(cfg, data)
     data = data.to(device)
     model = OrcaModel(model_spec(cfg)).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=cfg.lr, eps=1e-15)
@@ -307,13 +336,17 @@ def run_train(
     ckpt_dir = checkpoint_dir_for(out_dir)
     if restart and ckpt_dir.exists():
         shutil.rmtree(ckpt_dir)
-    ckpt_dir.mkdir(parents=True, exist_ok=True)
     step = 0
     seconds_before = 0.0
     existing = _checkpoints(ckpt_dir)
     if existing:
         state = load_checkpoint(existing[-1])
-        _check_resumable(state, cfg, existing[-1])
+        changes = identity_changes(json.loads(state["identity"]) if "identity" in state else None, identity)
+        if changes:
+            supersede_checkpoints(ckpt_dir, changes)
+            existing = []
+    ckpt_dir.mkdir(parents=True, exist_ok=True)
+    if existing:
         load_weights(model, state, existing[-1])
         optimizer.load_state_dict(state["optimizer"])
         scheduler.load_state_dict(state["scheduler"])
@@ -382,14 +415,14 @@ def run_train(
                                f"PSNR {psnr:.1f}")
                 if step % cfg.checkpoint_every == 0 or step == stop_at:
                     save_checkpoint(ckpt_dir, step, model, optimizer, scheduler, cfg, cfg.keep_checkpoints,
-                                    seconds_before + time.time() - t0)
+                                    seconds_before + time.time() - t0, identity)
                 if step % cfg.preview_every == 0 or step == cfg.iterations:
                     grid = preview_grid(model, data.images[0], data.K[0], data.c2w[0], cfg.preview_downscale)
                     write_png(previews / f"step_{step:07d}.png", grid)
                     writer.add_image("preview", grid, step, dataformats="HWC")
     except KeyboardInterrupt:
         save_checkpoint(ckpt_dir, step, model, optimizer, scheduler, cfg, cfg.keep_checkpoints,
-                        seconds_before + time.time() - t0)
+                        seconds_before + time.time() - t0, identity)
         log.warning("interrupted at step %d; checkpoint saved in %s; rerun to resume", step, ckpt_dir)
         raise
     finally:
