@@ -246,11 +246,12 @@ def training_identity(cfg: TrainConfig, data) -> dict[str, Any]:
 def identity_changes(saved: dict[str, Any] | None, current: dict[str, Any]) -> list[str]:
     """Why a checkpoint of identity ``saved`` cannot be resumed under ``current`` (empty: it can)."""
     if not saved:
-        return ["the checkpoint records no config or data (an older version)"]
-    changes = [f"train.{k}" for k in sorted(set(saved["config"]) | set(current["config"]))
-               if saved["config"].get(k) != current["config"].get(k)]
+        return ["it records no config or data (an older version)"]
+    keys = [f"train.{k}" for k in sorted(set(saved["config"]) | set(current["config"]))
+            if saved["config"].get(k) != current["config"].get(k)]
+    changes = [f"{', '.join(keys)} changed"] if keys else []
     if saved.get("data") != current["data"]:
-        changes.append("the images, masks or cameras")
+        changes.append("the images, masks or cameras changed")
     return changes
 
 
@@ -261,8 +262,8 @@ def supersede_checkpoints(ckpt_dir: Path, reasons: list[str]) -> Path:
     if aside.exists():
         shutil.rmtree(aside)
     ckpt_dir.rename(aside)
-    log.warning("the checkpoints in %s were trained on something else (%s changed): training starts over; "
-                "they are kept in %s", ckpt_dir, ", ".join(reasons), aside)
+    log.warning("not resuming from the checkpoints in %s (%s): training starts over; they are kept in %s",
+                ckpt_dir, "; ".join(reasons), aside)
     return aside
 
 
