@@ -3,7 +3,8 @@
 Writes ``results/<capture>/train/`` atomically when training finishes (final weights, the config used,
 metrics, previews, tensorboard events, ``train_report.json``, ``manifest.json``). Checkpoints live beside it
 in ``train.checkpoints/`` so an interrupted run (Ctrl-C, a crash, a killed job) resumes from the last one:
-``orca train`` resumes by default, ``--restart`` starts over.
+``orca train`` resumes by default, ``--restart`` starts over. Checkpoints of another training config or of
+other data (images, masks, cameras) are not resumed but moved to ``train.checkpoints.superseded/``.
 """
 
 from __future__ import annotations
