@@ -78,7 +78,8 @@ def main() -> None:
                      "specular_psnr_vs_gt": psnr(spec, target), "specular_psnr_vs_every_sample": psnr(spec, reference)})
         r = rows[-1]
         print(f"k={k:3d}{' (every sample)' if r['every_sample'] else '':15s} {r['ms_per_1k_rays']:8.1f} ms/1k rays  "
-              f"specular PSNR vs GT {r['specular_psnr_vs_gt']:.2f} dB, vs every-sample {r['specular_psnr_vs_every_sample']:.2f} dB",
+              f"specular PSNR vs GT {r['specular_psnr_vs_gt']:.2f} dB, "
+              f"vs every-sample {r['specular_psnr_vs_every_sample']:.2f} dB",
               flush=True)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps({"train": str(args.train), "rays": args.rays, "results": rows}, indent=2) + "\n")

@@ -117,12 +117,14 @@ def main() -> None:
     for preset in args.presets:
         row = bench_preset(preset, device, args.steps, args.warmup)
         rows.append(row)
-        print(f"{preset:9s} {row['seconds_per_iteration']:8.3f} s/it  {row['train_rays_per_second']:9.0f} train rays/s  "
+        print(f"{preset:9s} {row['seconds_per_iteration']:8.3f} s/it  "
+              f"{row['train_rays_per_second']:9.0f} train rays/s  "
               f"{row['render_rays_per_second']:9.0f} render rays/s  (batch {row['batch_rays']} + "
               f"{row['background_rays']} background; "
               f"{row['iterations']} iterations = {row['full_training_minutes']:.1f} min)", flush=True)
     machine = {
-        "device": torch.cuda.get_device_name(0) if device.type == "cuda" else platform.processor() or platform.machine(),
+        "device": (torch.cuda.get_device_name(0) if device.type == "cuda"
+                   else platform.processor() or platform.machine()),
         "cpu_threads": torch.get_num_threads(), "torch": torch.__version__, "platform": platform.platform(),
     }
     out = args.out or RESULTS / f"train_speed_{device.type}.json"

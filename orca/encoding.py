@@ -151,7 +151,9 @@ class HashGrid(nn.Module):
         # Corner indices built per axis and combined by broadcasting to (N, L, 2, 2, 2): an (N, L, 8, 3)
         # tensor of corner coordinates would cost 3x the memory traffic.
         near_far = torch.stack([base, base + 1], dim=-1)  # (N, L, 3, 2)
-        cx, cy, cz = near_far[:, :, 0, :, None, None], near_far[:, :, 1, None, :, None], near_far[:, :, 2, None, None, :]
+        cx = near_far[:, :, 0, :, None, None]
+        cy = near_far[:, :, 1, None, :, None]
+        cz = near_far[:, :, 2, None, None, :]
         per_level = lambda t: t.view(-1, 1, 1, 1)  # noqa: E731  (L, 1) -> (L, 1, 1, 1)
         # Dense levels come first (resolutions grow); each kind of index is computed for its own levels only.
         nd = self.n_dense

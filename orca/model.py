@@ -14,8 +14,8 @@ from typing import Literal, NamedTuple
 import torch
 from torch import nn
 
-from .fields import EnvironmentField, EnvironmentFieldSpec, SDFField, SDFFieldSpec
 from .differential import gradient, normalize
+from .fields import EnvironmentField, EnvironmentFieldSpec, SDFField, SDFFieldSpec
 from .losses import (
     cone_distortion_loss,
     eikonal_loss,

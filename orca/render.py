@@ -152,8 +152,8 @@ def render_environment_along(
         apex, axis: ``(M, 3)``; radius_growth, t_start: ``(M,)``.
     Returns:
         radiance ``(M, 3)``, depth past the start ``(M,)`` (:func:`~orca.volume.quantile_depth`),
-        weights ``(M, E)``, normalized edges ``(M, E + 1)`` (E = env_samples + env_fine). A directional (2D map) field gives infinite depth and
-        zero weights.
+        weights ``(M, E)``, normalized edges ``(M, E + 1)`` (E = env_samples + env_fine). A directional (2D map)
+        field gives infinite depth and zero weights.
     """
     m = apex.shape[0]
     u = environment_edges(spec, m, apex.dtype, apex.device)

@@ -126,8 +126,10 @@ def save_cameras(path: str | Path, cameras: CameraSet) -> Path:
     return write_json(path, cameras.model_dump(mode="json"))
 
 
-def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = np.array([0.0, 0.0, 1.0])) -> np.ndarray:
-    """``(4, 4)`` OpenCV camera-to-world looking from ``eye`` at ``target`` (image up ~ ``up``)."""
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray | None = None) -> np.ndarray:
+    """``(4, 4)`` OpenCV camera-to-world looking from ``eye`` at ``target`` (image up ~ ``up``, default +z)."""
+    if up is None:
+        up = np.array([0.0, 0.0, 1.0])
     eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
     z = target - eye
     z /= np.linalg.norm(z)

@@ -34,7 +34,8 @@ class DecodeConfig(StrictModel):
         None, description="file name (or stem) of the reference image (white balance, exposure); default: the first."
     )
     normalize_exposure: bool = Field(
-        True, description="scale each image by its EXIF exposure (shutter x ISO / f-number^2) relative to the reference."
+        True,
+        description="scale each image by its EXIF exposure (shutter x ISO / f-number^2) relative to the reference.",
     )
     min_images: int = Field(3, ge=1, description="fewer usable photos than this is an error.")
     downscale: int = Field(1, ge=1, le=16, description="integer downscale factor (area averaging) after decoding.")
@@ -246,7 +247,9 @@ class TrainConfig(StrictModel):
     keep_checkpoints: int = Field(3, ge=1)
     device: Literal["auto", "cpu", "cuda"] = "auto"
     seed: int = 0
-    scene_radius: float = Field(1.2, gt=0, description="rays are sampled inside this sphere (object in the unit sphere)")
+    scene_radius: float = Field(
+        1.2, gt=0, description="rays are sampled inside this sphere (object in the unit sphere)"
+    )
     # geometry
     sdf_encoding: Literal["hashgrid", "frequency"] = "hashgrid"
     sdf_hidden: int = Field(64, ge=8)
@@ -255,7 +258,9 @@ class TrainConfig(StrictModel):
     grid_levels: int = Field(12, ge=1)
     grid_log2_table: int = Field(16, ge=8, le=24)
     grid_max_resolution: int = Field(1024, ge=16)
-    texture_levels: int = Field(12, ge=0, description="levels of the diffuse head's own hash grid (0: none, as the paper)")
+    texture_levels: int = Field(
+        12, ge=0, description="levels of the diffuse head's own hash grid (0: none, as the paper)"
+    )
     texture_log2_table: int = Field(17, ge=8, le=24)
     texture_max_resolution: int = Field(2048, ge=16)
     # environment
@@ -293,7 +298,9 @@ class TrainConfig(StrictModel):
         "part of it, where a prop left semi-transparent sits (docs/method.md)"
     )
     env_near: float = Field(0.05, gt=0, description="first environment sample past a cone's start (object radii)")
-    env_far: float = Field(100.0, gt=0, description="last environment sample (object radii; the contraction keeps it finite)")
+    env_far: float = Field(
+        100.0, gt=0, description="last environment sample (object radii; the contraction keeps it finite)"
+    )
     cone_samples: int = Field(2, ge=1, description="top-weight primary samples that cast virtual cones")
     cone_method: Literal["closed_form", "bounding_rays", "naive"] = "closed_form"
     ior: float = Field(1.5, gt=1, description="index of refraction of the glossy coating (Fresnel)")
@@ -301,7 +308,9 @@ class TrainConfig(StrictModel):
     beta_final: float = Field(0.005, gt=0, description="β is capped by a schedule from beta_init to this")
     beta_anneal: float = Field(0.5, ge=0, le=1, description="fraction of training at which the cap reaches beta_final")
     sdf_levels_start: int = Field(4, ge=1, description="coarse-to-fine: SDF hash-grid levels active at the start")
-    sdf_levels_full: float = Field(0.3, ge=0, le=1, description="fraction of training after which all levels are active")
+    sdf_levels_full: float = Field(
+        0.3, ge=0, le=1, description="fraction of training after which all levels are active"
+    )
     losses: LossConfig = Field(default_factory=LossConfig)
 
     @model_validator(mode="after")

@@ -54,7 +54,8 @@ class ObjectSphere:
     notes: list[str] = field(default_factory=list)
 
 
-def axes_convergence(centers: np.ndarray, dirs: np.ndarray, iterations: int = 10) -> tuple[np.ndarray, np.ndarray, float]:
+def axes_convergence(centers: np.ndarray, dirs: np.ndarray,
+                     iterations: int = 10) -> tuple[np.ndarray, np.ndarray, float]:
     """Point nearest to all lines ``centers[i] + t dirs[i]`` (least squares, Cauchy-reweighted).
 
     Args:
@@ -168,7 +169,8 @@ def mask_votes(masks: Sequence[np.ndarray], c2w: np.ndarray, K: np.ndarray,
 
 
 def _carve(masks: Sequence[np.ndarray], c2w: np.ndarray, K: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-           resolution: int, keep_fraction: float, floor: tuple[np.ndarray, float] | None) -> tuple[np.ndarray, np.ndarray]:
+           resolution: int, keep_fraction: float,
+           floor: tuple[np.ndarray, float] | None) -> tuple[np.ndarray, np.ndarray]:
     """Voxel centres ``(V, 3)`` of the box ``[lo, hi]`` kept by the masks, and the voxel size ``(3,)``."""
     size = (hi - lo) / resolution
     axes = [lo[k] + (np.arange(resolution) + 0.5) * size[k] for k in range(3)]

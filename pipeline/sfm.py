@@ -368,7 +368,8 @@ def _no_model_error(db_path: Path, names: list[str], features: dict[str, int], n
         db.close()
     if best is None:
         detail = (f"no two of the {len(names)} photos share enough matching features "
-                  f"({num_verified} verified pairs; features per photo: median {int(np.median(list(features.values())))})")
+                  f"({num_verified} verified pairs; "
+                  f"features per photo: median {int(np.median(list(features.values())))})")
     else:
         detail = (f"no pair of photos has enough matches seen from different enough viewpoints to start a model "
                   f"(best pair {best[0]} & {best[1]}: {best_n} matches moving {motion:.1f} px)")

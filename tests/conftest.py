@@ -17,9 +17,9 @@ import pytest  # noqa: E402
 def tiny_capture(tmp_path_factory) -> Path:
     """A 4-view 48x36 glossy-sphere capture with ground truth (coarse textures keep it ~10 s)."""
     pytest.importorskip("mitsuba")
-    from pipeline.synth import SCENES, SynthOptions, render_capture
-
     from helpers import small
+
+    from pipeline.synth import SCENES, SynthOptions, render_capture
 
     options = SynthOptions(views=4, width=48, height=36, spp=16, env_size=16, coverage_spp=9, seed=1)
     return render_capture(small(SCENES["sphere"]), tmp_path_factory.mktemp("tiny") / "sphere", options)

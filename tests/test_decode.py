@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rawpy
+from test_dng import colourful, psnr
 
 from pipeline.config import DecodeConfig
 from pipeline.dng import Exposure, decoded_scale, write_dng
@@ -18,8 +19,6 @@ from pipeline.errors import InputError
 from pipeline.imageio import linear_to_srgb, read_exr, read_image, write_png
 from pipeline.raw import apply_orientation
 from pipeline.stages.decode import register, run_decode
-
-from test_dng import colourful, psnr
 
 TESTDATA = Path(__file__).resolve().parents[2] / "shared" / "testdata"
 RAW_DIR = TESTDATA / "raw"

@@ -17,7 +17,6 @@ from pipeline.config import PRESETS, load_config
 from pipeline.errors import ConfigError, InputError
 from pipeline.imageio import linear_to_srgb, read_exr, read_image, srgb_to_linear, write_exr, write_png
 
-
 # --- image I/O ----------------------------------------------------------------------------------------
 
 
@@ -181,7 +180,8 @@ def test_stage_cli_overrides_may_omit_the_stage_section():
 
     parser = argparse.ArgumentParser()
     add_config_arguments(parser)
-    args = parser.parse_args(["--set", "iterations=7", "--set", "losses.background=0.25", "--set", "mesh.resolution=64"])
+    args = parser.parse_args(
+        ["--set", "iterations=7", "--set", "losses.background=0.25", "--set", "mesh.resolution=64"])
     cfg = config_from_arguments(args, "train")
     assert cfg.train.iterations == 7 and cfg.train.losses.background == 0.25 and cfg.mesh.resolution == 64
 

@@ -109,7 +109,8 @@ def test_transforms_json_round_trips_cameras(tmp_path):
     back = load_transforms(tmp_path / "transforms.json")
     assert not back.distortion
     for a, b in zip(cams.cameras, back.cameras.cameras):
-        assert a.name == b.name and (a.fx, a.fy, a.cx, a.cy, a.width, a.height) == (b.fx, b.fy, b.cx, b.cy, b.width, b.height)
+        assert a.name == b.name
+        assert (a.fx, a.fy, a.cx, a.cy, a.width, a.height) == (b.fx, b.fy, b.cx, b.cy, b.width, b.height)
         np.testing.assert_allclose(a.c2w, b.c2w, atol=1e-12)
     np.testing.assert_array_equal(opengl_from_opencv(opengl_from_opencv(cams.cameras[0].c2w)), cams.cameras[0].c2w)
 
@@ -332,7 +333,8 @@ def test_fountain_p11_real_photos(tmp_path):
     extent = float(np.linalg.norm(ref[:, :3, 3].max(0) - ref[:, :3, 3].min(0)))
     frac = float(err.center.max() / extent)
     print(f"fountain-P11: 11/11 in {seconds:.1f} s, centre error max {100 * frac:.3f} % median "
-          f"{100 * np.median(err.center) / extent:.3f} % of the extent, rotation median {np.median(err.rotation_deg):.2f} deg")
+          f"{100 * np.median(err.center) / extent:.3f} % of the extent, "
+          f"rotation median {np.median(err.rotation_deg):.2f} deg")
     assert frac <= 0.005
 
 

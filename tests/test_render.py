@@ -146,9 +146,8 @@ class _Slab(torch.nn.Module):
 def test_training_cones_jitter_their_coarse_edges_so_no_space_goes_unseen():
     """Fixed edges sample the same shells on every training ray: a floater between two shells is never seen
     (and so never corrected) by that camera. Stratified edges see it on some rays."""
-    from orca.render import environment_edges, render_environment_along
-
     from orca.frustum import conical_frustum_gaussian
+    from orca.render import environment_edges, render_environment_along
 
     train = RenderSpec(env_samples=16, env_fine=0)
     evaluate = RenderSpec(env_samples=16, env_fine=0, deterministic=True)

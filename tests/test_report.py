@@ -23,7 +23,8 @@ TINY = [
     "train.grid_log2_table=10", "train.texture_levels=2", "train.texture_log2_table=10",
     "train.env_grid_log2_table=10", "train.sdf_hidden=16", "train.env_hidden=16", "train.log_every=1",
     "train.preview_every=2", "train.device=cpu",
-    "masks.hull_resolution=32", "mesh.resolution=24", "export.view_size=8", "export.panorama_width=16", "export.video_frames=2",
+    "masks.hull_resolution=32", "mesh.resolution=24", "export.view_size=8", "export.panorama_width=16",
+    "export.video_frames=2",
     "export.video_width=16", "export.video_height=12", "export.object_views=1", "export.object_downscale=4",
 ]
 
@@ -227,4 +228,5 @@ def test_training_curves_from_a_long_metrics_log(tmp_path):
     loss, psnr = fig.axes[0], fig.axes[1]
     assert loss.get_yscale() == "log" and any("running mean" in t.get_text() for t in loss.get_legend().get_texts())
     assert np.nanmax(psnr.lines[0].get_ydata()) == pytest.approx(10 + 300 / 20)
-    assert any(np.allclose(line.get_xdata(), 51) for a in fig.axes for line in a.lines[1:] if len(line.get_xdata()) == 2)
+    assert any(np.allclose(line.get_xdata(), 51)
+               for a in fig.axes for line in a.lines[1:] if len(line.get_xdata()) == 2)

@@ -53,7 +53,8 @@ def test_the_dag_runs_decode_train_evaluate_then_nothing(tiny_capture, tmp_path)
     evaluation = json.loads((results / "evaluate" / "evaluate.json").read_text())
     assert "chamfer" in evaluation["mesh"] and evaluation["poses"]["summary"]["rotation_deg_max"] < 1e-6
     masks = json.loads((results / "masks" / "masks_report.json").read_text())
-    assert {v["source"] for v in masks["views"]} == {"user"} and (results / "masks" / "masks" / "IMG_0001.png").is_file()
+    assert {v["source"] for v in masks["views"]} == {"user"}
+    assert (results / "masks" / "masks" / "IMG_0001.png").is_file()
     train_manifest = json.loads((results / "train" / "manifest.json").read_text())
     assert "masks/cameras.json" in json.dumps(train_manifest)  # trained on the masks stage's tight frame
     # the report comes last, from every stage's folder, evaluate's included (the capture has ground truth)

@@ -12,17 +12,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import small
 
 from pipeline.artifacts import read_json
 from pipeline.cameras import load_cameras
 from pipeline.imageio import read_exr, read_image, srgb_to_linear
-from pipeline.synth import SCENES, SynthOptions, render_capture
-from pipeline.synth import geometry, render as synth_render
+from pipeline.synth import SCENES, SynthOptions, geometry, render_capture
+from pipeline.synth import render as synth_render
 from pipeline.synth.build import _frame_for
 from pipeline.synth.scenes import AlbedoSpec, SceneSpec, object_mesh, resolve, rotation_xyz
 from pipeline.synth.textures import PosterStyle, poster
-
-from helpers import small
 
 pytest.importorskip("mitsuba")
 

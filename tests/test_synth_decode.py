@@ -49,5 +49,6 @@ def test_synthetic_dngs_decode_back_to_ground_truth(decoded_synth):
     scene = read_json(capture / "ground_truth" / "scene.json")
     assert len({p["exposure"]["value"] for p in scene["photos"]}) > 1, "views shot at different EXIF exposures"
     psnr = psnr_per_view(capture, decode_dir)
-    print("orca synth DNG -> orca decode vs ground truth, PSNR per view (dB):", {k: round(v, 1) for k, v in psnr.items()})
+    print("orca synth DNG -> orca decode vs ground truth, PSNR per view (dB):",
+          {k: round(v, 1) for k, v in psnr.items()})
     assert min(psnr.values()) > 32.0

@@ -100,7 +100,8 @@ def test_checkpoints_of_another_config_or_other_data_are_set_aside_not_resumed(t
               "train.env_depth_quantile=0.4"), max_steps=2)
     assert _steps(ckpts) == [1, 2, 4] and not aside.exists()
     # another network, or another loss weight: the old run is kept aside, the new one starts from zero
-    for change, last_aside in (("train.sdf_hidden=32", "step_0000004.pt"), ("train.losses.eikonal=0.2", "step_0000002.pt")):
+    for change, last_aside in (("train.sdf_hidden=32", "step_0000004.pt"),
+                               ("train.losses.eikonal=0.2", "step_0000002.pt")):
         run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, _cfg(change), max_steps=2)
         assert _steps(ckpts) == [1, 2], change
         assert sorted(p.name for p in aside.glob("step_*.pt"))[-1] == last_aside, change

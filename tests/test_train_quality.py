@@ -11,8 +11,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import torch
-
 from helpers import small
+
 from pipeline.config import DecodeConfig, load_config
 from pipeline.imageio import read_exr, read_image
 from pipeline.stages.decode import run_decode

@@ -800,7 +800,8 @@ def _normals_rgb(n: np.ndarray) -> np.ndarray:
 
 
 def _row_label(name: str, figures: dict[str, Any], keys: Sequence[tuple[str, str]]) -> str:
-    parts = [fmt.format(figures[k]) for k, fmt in keys if isinstance(figures.get(k), float) and math.isfinite(figures[k])]
+    parts = [fmt.format(figures[k]) for k, fmt in keys
+             if isinstance(figures.get(k), float) and math.isfinite(figures[k])]
     return "\n".join([name, *parts])
 
 
@@ -821,7 +822,8 @@ def object_grid(path: Path, rows: Sequence[tuple[str, dict, dict, dict]]) -> Pat
             axes[r, c].imshow(tile, interpolation="nearest")
             if r == 0:
                 axes[r, c].set_title(columns[c], fontsize=9)
-        label = _row_label(name, figures, (("psnr_srgb_rgb", "sRGB PSNR {:.1f} dB"), ("psnr_srgb_specular", "spec. {:.1f} dB"),
+        label = _row_label(name, figures, (("psnr_srgb_rgb", "sRGB PSNR {:.1f} dB"),
+                                           ("psnr_srgb_specular", "spec. {:.1f} dB"),
                                            ("normal_mae_deg", "normals {:.1f}°")))
         axes[r, 0].set_ylabel(label, fontsize=8)
     fig.savefig(path)
@@ -1101,7 +1103,10 @@ def resolve_results(path: Path) -> tuple[Path, Path | None, Path | None]:
     path = Path(path)
     if (path / "model.pt").is_file() or not (path / "train" / "model.pt").is_file():
         return path, None, None
-    found = lambda p: p if p.is_file() else None
+
+    def found(p: Path) -> Path | None:
+        return p if p.is_file() else None
+
     return path / "train", found(path / "poses" / "cameras.json"), found(path / "mesh" / "mesh.ply")
 
 

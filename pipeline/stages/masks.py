@@ -317,7 +317,7 @@ def run_masks(
         records, tiles = [], []
         with progress() as bar:
             task = bar.add_task("write masks", total=len(names))
-            for i, (cam, view) in enumerate(zip(cameras.cameras, views)):
+            for i, (cam, _view) in enumerate(zip(cameras.cameras, views)):
                 photo = decoded.srgb(cam.name)
                 if cam.name in user_files:  # read again, not kept from loading: one full-size mask in memory
                     full = user_mask(user_files[cam.name], cam, undistortion)
@@ -366,8 +366,9 @@ def _segment_options(config: MasksConfig) -> Any:
 
     return SegmentOptions(
         rounds=config.rounds, grabcut_iterations=config.grabcut_iterations, hull_resolution=config.hull_resolution,
-        carve_votes=config.carve_votes, carve_share=config.carve_share, seed_radius=config.seed_radius, neighbours=config.neighbours,
-        neighbour_max_deg=config.neighbour_max_deg, consistency_rank=config.consistency_rank, floor=config.floor,
+        carve_votes=config.carve_votes, carve_share=config.carve_share, seed_radius=config.seed_radius,
+        neighbours=config.neighbours, neighbour_max_deg=config.neighbour_max_deg,
+        consistency_rank=config.consistency_rank, floor=config.floor,
         floor_threshold=config.floor_threshold, occluders=config.sweep, occluder_neighbours=config.sweep_neighbours,
         occluder_rank=config.sweep_rank, occluder_threshold=config.sweep_threshold,
         texture_threshold=config.texture_threshold, weak_weight=config.doubtful_vote, dark_level=config.dark_level,

@@ -167,7 +167,8 @@ def marching_cubes(
     vbg.attribute("tsdf").reshape((-1, 1))[flat] = o3c.Tensor(values[:, None], device=dev)
     vbg.attribute("weight").reshape((-1, 1))[flat] = o3c.Tensor(np.ones((len(values), 1), np.float32), device=dev)
     mesh = vbg.extract_triangle_mesh(weight_threshold=0.5)
-    vertices = mesh.vertex.positions.cpu().numpy().astype(np.float64) if "positions" in mesh.vertex else np.zeros((0, 3))
+    vertices = (mesh.vertex.positions.cpu().numpy().astype(np.float64) if "positions" in mesh.vertex
+                else np.zeros((0, 3)))
     triangles = mesh.triangle.indices.cpu().numpy().astype(np.int64) if "indices" in mesh.triangle else np.zeros(
         (0, 3), np.int64)
     triangles = _outward(vertices, triangles, sdf, grid.voxel_size)

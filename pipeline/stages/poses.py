@@ -515,7 +515,8 @@ def undistort_mask(mask: np.ndarray, und: UndistortMaps, name: str) -> np.ndarra
     return _remap(mask.astype(np.uint8), und.maps[und.lens_of[name]], nearest=True) > 0
 
 
-def _remap(img: np.ndarray, maps: tuple[np.ndarray, np.ndarray], nearest: bool = False, border: float = 0) -> np.ndarray:
+def _remap(img: np.ndarray, maps: tuple[np.ndarray, np.ndarray], nearest: bool = False,
+           border: float = 0) -> np.ndarray:
     import cv2
 
     interp = cv2.INTER_NEAREST if nearest else cv2.INTER_LINEAR

@@ -228,7 +228,8 @@ class Page:
         size = path.stat().st_size if path.is_file() else None
         extra = f" ({size / 1e6:.2f} MB)" if size is not None and size >= 1e5 else (
             f" ({size} bytes)" if size is not None else "")
-        return f'<a href="{esc(Path(href).as_posix())}">{esc(text or path.name)}</a> <code>{esc(path)}</code>{esc(extra)}'
+        return (f'<a href="{esc(Path(href).as_posix())}">{esc(text or path.name)}</a> '
+                f'<code>{esc(path)}</code>{esc(extra)}')
 
     def _rel(self, path: Path) -> str:
         try:
@@ -356,7 +357,8 @@ def section_decode(page: Page, folder: Path) -> tuple[str, str]:
                  for im in images]
     body += details(f"every photo ({len(images)})", grid_table(
         ["name", "file", "format", "shutter (s)", "ISO", "f-number", "exposure scale", "clipped %"], per_image))
-    summary = f"{len(images)} photos" + (f", {_size_text(size, 'x')}" if isinstance(size, list) and len(size) == 2 else "")
+    summary = f"{len(images)} photos" + (
+        f", {_size_text(size, 'x')}" if isinstance(size, list) and len(size) == 2 else "")
     if clip:
         summary += f", clipped {100 * clip['mean']:.2f} % mean"
     return summary, body
@@ -438,8 +440,8 @@ def section_masks(page: Page, folder: Path) -> tuple[str, str]:
         ("worst view", agreement.get("worst_view")),
         ("warning threshold (IoU)", agreement.get("threshold")),
         ("views that disagree with the hull", ", ".join(agreement.get("disagreeing_views") or []) or "none"),
-        ("object sphere (poses frame): centre, radius", f"{text(sphere.get('centre'), 3)}, {text(sphere.get('radius'), 3)}"
-         if sphere else None),
+        ("object sphere (poses frame): centre, radius",
+         f"{text(sphere.get('centre'), 3)}, {text(sphere.get('radius'), 3)}" if sphere else None),
         ("support plane", "none found" if plane is None else
          f"normal {text(plane.get('normal'), 3)}, offset {text(plane.get('offset'), 3)}, explains "
          f"{text(plane.get('explained_fraction'), 3)} of the pixels"),
@@ -500,7 +502,10 @@ def training_curves(rows: list[dict[str, Any]]):
     fig.subplots_adjust(left=0.07, right=0.93, bottom=0.08, top=0.95, wspace=0.25, hspace=0.35)  # constrained
     # layout takes seconds with log axes
     joint = next((r["step"] for r in rows if r.get("phase") == "joint"), None)
-    positive = lambda v: np.where(v > 0, v, np.nan)  # log axes
+
+    def positive(v: np.ndarray) -> np.ndarray:  # log axes
+        return np.where(v > 0, v, np.nan)
+
     window = len(rows) // 50  # a running mean over 2 % of the rows on top of the noisy per-batch values
 
     def smooth(v: np.ndarray) -> np.ndarray:
@@ -510,7 +515,8 @@ def training_curves(rows: list[dict[str, Any]]):
         return np.where(den > 0, num / np.maximum(den, 1), np.nan)
 
     for ax, key, colour, title in ((axes[0, 0], "loss", "tab:blue", "total loss"),
-                                   (axes[0, 1], "psnr_object", "tab:green", "PSNR on object pixels (dB, training batch)")):
+                                   (axes[0, 1], "psnr_object", "tab:green",
+                                    "PSNR on object pixels (dB, training batch)")):
         v = series(key)
         ax.plot(steps, positive(v) if key == "loss" else v, color=colour, lw=0.8, alpha=0.5 if window > 1 else 1)
         if window > 1:
@@ -654,9 +660,11 @@ def section_export(page: Page, folder: Path) -> tuple[str, str]:
             ("up (world)", frame.get("up")),
             ("environment views", f"{len(report.get('environment_views') or [])} at {report.get('view_size')} px"),
             ("panorama", f"{pano.get('width')} x {pano.get('height')}" if pano else None),
-            ("depth colour scale", f"{text(scale.get('min'))} – {text(scale.get('max'))} ({text(scale.get('colormap'))}; "
-                                   f"{text(scale.get('meaning'))})" if scale else None),
-            ("point cloud", f"{cloud.get('points')} points (depth below {text(cloud.get('max_depth'))})" if cloud else None),
+            ("depth colour scale", f"{text(scale.get('min'))} – {text(scale.get('max'))} "
+                                   f"({text(scale.get('colormap'))}; {text(scale.get('meaning'))})"
+                                   if scale else None),
+            ("point cloud", f"{cloud.get('points')} points (depth below {text(cloud.get('max_depth'))})"
+                            if cloud else None),
             ("videos", f"{text((videos.get('orbit') or {}).get('frames'))} + "
                        f"{text((videos.get('flythrough') or {}).get('frames'))} frames at "
                        f"{text(videos.get('size'))}, {text(videos.get('fps'))} fps" if videos else None),
@@ -667,7 +675,8 @@ def section_export(page: Page, folder: Path) -> tuple[str, str]:
         body = kv_table(rows)
     body += "<h3>Files</h3><ul>"
     for path, what in ((folder / "videos" / "orbit.mp4", "orbit of the object (video)"),
-                       (folder / "videos" / "flythrough.mp4", "flythrough of the environment from inside the object (video)"),
+                       (folder / "videos" / "flythrough.mp4",
+                        "flythrough of the environment from inside the object (video)"),
                        (folder / "environment_points.ply", "the environment as a coloured point cloud"),
                        (folder / "environment_points_colmap.ply", "the same in COLMAP's frame")):
         if path.exists() or path.name != "environment_points_colmap.ply":
@@ -694,7 +703,8 @@ def section_export(page: Page, folder: Path) -> tuple[str, str]:
             cells = "".join(f"<td>{page.image(folder / 'object' / f'{name}_{part}.png', required=False)}</td>"
                             for part in ("rgb", "diffuse", "specular", "normal"))
             rows.append(f"<tr><th>{esc(name)}</th>{cells}</tr>")
-        body += ('<table class="views"><tr><th>view</th><th>combined</th><th>diffuse</th><th>specular</th><th>normals</th></tr>'
+        body += ('<table class="views"><tr><th>view</th><th>combined</th><th>diffuse</th>'
+                 '<th>specular</th><th>normals</th></tr>'
                  + "".join(rows) + "</table>")
     summary = f"{len(names)} environment views, panorama" + (
         f", {report['point_cloud'].get('points')} points" if isinstance(report.get("point_cloud"), dict) else "")
@@ -705,7 +715,8 @@ def _view_table(page: Page, folder: Path, names: Sequence[str]) -> str:
     head = "".join(f"<th>{esc(n)}</th>" for n in names)
     rgb = "".join(f"<td>{page.image(folder / f'{n}_rgb.png', alt=f'{n} RGB', width=240)}</td>" for n in names)
     depth = "".join(f"<td>{page.image(folder / f'{n}_depth.png', alt=f'{n} depth', width=240)}</td>" for n in names)
-    return f'<table class="views"><tr><th></th>{head}</tr><tr><th>RGB</th>{rgb}</tr><tr><th>depth</th>{depth}</tr></table>'
+    return (f'<table class="views"><tr><th></th>{head}</tr><tr><th>RGB</th>{rgb}</tr>'
+            f'<tr><th>depth</th>{depth}</tr></table>')
 
 
 def _metric_rows(means: dict[str, Any]) -> list[tuple[str, Any, str, str]]:
@@ -763,7 +774,8 @@ def section_evaluate(page: Page, folder: Path) -> tuple[str, str]:
         s = poses.get("summary") or {}
         body += "<h3>Poses against the ground truth</h3>" + kv_table([
             ("cameras aligned", s.get("cameras")), ("missing", s.get("missing")),
-            ("rotation error median / max (deg)", f"{text(s.get('rotation_deg_median'))} / {text(s.get('rotation_deg_max'))}"),
+            ("rotation error median / max (deg)",
+             f"{text(s.get('rotation_deg_median'))} / {text(s.get('rotation_deg_max'))}"),
             ("centre error median / max (% of orbit radius)",
              f"{text(s.get('center_median_percent'))} / {text(s.get('center_max_percent'))}"),
             ("method", poses.get("method")),

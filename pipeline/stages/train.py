@@ -57,9 +57,10 @@ def load_image_set(decode_dir: Path, cameras_path: Path, masks_dir: Path):
     """
     import torch
 
+    from orca.data import ImageSet
+
     from ..imageio import read_image
     from ..results import load_decode
-    from orca.data import ImageSet
 
     decoded = load_decode(decode_dir)
     cams = load_cameras(cameras_path).by_name()
@@ -379,7 +380,8 @@ def run_train(
                 phase = "mask" if step < cfg.mask_warmup else "joint"
                 model.apply_schedule(step / cfg.iterations)
                 batch = data.sample(cfg.batch_rays, cfg.object_fraction, generator)
-                background = data.sample_background(cfg.background_rays, background_generator) if cfg.background_rays else None
+                background = (data.sample_background(cfg.background_rays, background_generator)
+                              if cfg.background_rays else None)
                 total, terms, out = objective(model, batch, weights, phase, background)
                 if not torch.isfinite(total):
                     bad = ", ".join(k for k, v in terms.items() if not torch.isfinite(v)) or "total"
@@ -446,7 +448,8 @@ def run_train(
         shutil.copytree(ckpt_dir / "tb", tmp / "tensorboard")
         write_json(tmp / "train_report.json", {
             "iterations": step, "images": names, "size": [width, height], "device": str(device),
-            "seconds_this_run": round(seconds, 2), "training_seconds": round(seconds_before + seconds, 2), "final_losses": final_losses, "beta": model.beta.item(),
+            "seconds_this_run": round(seconds, 2), "training_seconds": round(seconds_before + seconds, 2),
+            "final_losses": final_losses, "beta": model.beta.item(),
         })
         write_manifest(tmp, stage="train", inputs={"cameras": cameras_path, "decode": decode_dir / "decode.json"},
                        config=cfg.model_dump(), started=started)

@@ -43,7 +43,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help=f"environment ground-truth views are N x N (default {d.env_size})")
     p.add_argument("--env-spp", type=int, default=None, help="samples per pixel of environment views (default: --spp)")
     p.add_argument("--optics-blur", type=float, default=d.optics_blur_px, metavar="SIGMA",
-                   help=f"lens + optical low-pass blur of the photos, Gaussian sigma in pixels (default {d.optics_blur_px})")
+                   help="lens + optical low-pass blur of the photos, Gaussian sigma in pixels "
+                        f"(default {d.optics_blur_px})")
     p.add_argument("--overwrite", action="store_true", help="replace OUT_DIR if it exists")
     p.set_defaults(func=run)
 

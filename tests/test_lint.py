@@ -1,0 +1,14 @@
+"""The tree passes ``ruff check`` with the config in pyproject.toml (line length 120, E/F/W/I/UP/B)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_ruff_check_passes():
+    proc = subprocess.run([sys.executable, "-m", "ruff", "check", str(ROOT)], cwd=ROOT, capture_output=True, text=True)
+    assert proc.returncode == 0, f"ruff check failed:\n{proc.stdout}{proc.stderr}"
