@@ -176,7 +176,8 @@ def flythrough_path(cfg: ExportConfig, frame: np.ndarray) -> list[Camera]:
 def render_panorama(model, width: int, height: int, centre: np.ndarray, frame: np.ndarray,
                     chunk: int = 8192, bar=None, task=None) -> dict[str, np.ndarray]:
     """The environment field from ``centre`` as an equirectangular panorama: ``rgb`` ``(H, W, 3)`` linear and
-    ``depth`` ``(H, W)``, the expected distance along each ray."""
+    ``depth`` ``(H, W)``, the distance along each ray at the model's ``spec.render.depth_quantile`` of its
+    weight (:func:`orca.volume.quantile_depth`)."""
     import torch
 
     device = next(model.parameters()).device
@@ -457,7 +458,8 @@ def run_export(train_dir: Path, out_dir: Path, cfg: ExportConfig | None = None, 
                       "units": "the model's normalized frame: object radii", "to_colmap": to_colmap},
             "environment_views": [c.name for c in env_cams], "view_size": cfg.view_size,
             "panorama": {"width": pano_w, "height": pano_h, "centre": centre.tolist(),
-                         "depth": "expected distance along each ray (not z-depth)"},
+                         "depth": "distance along each ray where its accumulated weight reaches "
+                                  f"{model.spec.render.depth_quantile:g} of the total (not z-depth)"},
             "depth_png_scale": {"min": scale[0], "max": scale[1], "colormap": "turbo",
                                 "meaning": "1st-99th percentile of the panorama's finite depth; black: no depth"},
             "point_cloud": {"points": len(points), "max_depth": cfg.point_cloud_max_depth,
