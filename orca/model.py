@@ -24,7 +24,7 @@ from .losses import (
     normal_smoothness_loss,
     photometric_loss,
 )
-from .render import RayOutputs, RenderSpec, render_environment_along, render_rays
+from .render import RayOutputs, RenderSpec, free_space_opacity, render_environment_along, render_rays
 
 
 @dataclass(frozen=True)
@@ -111,6 +111,7 @@ class LossWeights:
     orientation: float = 1e-3
     distortion: float = 1e-3
     background: float = 0.1  # background pixels supervise the environment field directly (beyond the paper)
+    free_space: float = 0.0  # no environment density between a camera and the object (beyond the paper)
     clipped_excess: float = 0.1  # clipped pixels: weight of a prediction's excess over the recorded value
     smoothness: float = 0.0  # normals at the surface vs a small random step away (beyond the paper)
     smoothness_step: float = 0.01  # the step's standard deviation, in object radii
@@ -163,6 +164,11 @@ def objective(
         terms["distortion"] = cone_distortion_loss(out.env_weights, out.env_s)
         if weights.smoothness > 0:
             terms["smoothness"] = smoothness_term(model, batch, out, weights.smoothness_step)
+    if weights.free_space > 0 and obj.any():
+        opacity = free_space_opacity(
+            model.env_field, batch.origins[obj], batch.dirs[obj], batch.radii[obj], model.spec.render
+        )
+        terms["free_space"] = opacity.mean()
     if weights.background > 0:
         rays = [tuple(t[~obj] for t in (batch.origins, batch.dirs, batch.radii, batch.rgb, batch.valid))]
         if background is not None:

@@ -45,6 +45,7 @@ class RenderSpec:
     env_fine: int = 0  # ... plus this many drawn from the coarse weights (coarse-to-fine; 0: one pass)
     env_fine_render: int | None = None  # env_fine when a trained model renders (None: env_fine); see for_rendering
     depth_quantile: float = 0.5  # an environment ray's depth: where its weight reaches this share (0.5: median)
+    free_space_samples: int = 16  # environment samples between a camera and the object (free_space_opacity)
     env_near: float = 1e-2  # first environment sample past the surface (normalized units)
     env_far: float = 1e3  # the room may be far; the contraction keeps this finite
     ior: float = 1.5  # dielectric coating (Fresnel)
@@ -89,6 +90,18 @@ def fresnel_dielectric(cos_theta: torch.Tensor, ior: float) -> torch.Tensor:
     return 0.5 * (rs.square() + rp.square())
 
 
+def stratified_edges(
+    m: int, n: int, deterministic: bool, dtype: torch.dtype, device: torch.device
+) -> torch.Tensor:
+    """``(m, n + 1)`` edges of ``n`` bins over [0, 1]: evenly spaced, or (unless ``deterministic``) with each
+    inner edge jittered within its own bin, as NeRF's stratified samples."""
+    s = torch.linspace(0, 1, n + 1, dtype=dtype, device=device).expand(m, -1)
+    if deterministic:
+        return s
+    jitter = (torch.rand(m, n - 1, dtype=dtype, device=device) - 0.5) / n
+    return torch.cat([s[:, :1], s[:, 1:-1] + jitter, s[:, -1:]], dim=-1)
+
+
 def environment_edges(spec: RenderSpec, m: int, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
     """``(m, env_samples + 1)`` coarse distances past the start of ``m`` cones, log-spaced (near things get
     the samples they need, far walls still get some), starting exactly at 0.
@@ -97,11 +110,7 @@ def environment_edges(spec: RenderSpec, m: int, dtype: torch.dtype, device: torc
     NeRF's coarse samples): with fixed edges every training ray of a camera samples the same shells, and
     the field learns density between them that those rays never see but any other viewpoint does (floaters).
     """
-    n = spec.env_samples
-    s = torch.linspace(0, 1, n + 1, dtype=dtype, device=device).expand(m, -1)
-    if not spec.deterministic:
-        jitter = (torch.rand(m, n - 1, dtype=dtype, device=device) - 0.5) / n
-        s = torch.cat([s[:, :1], s[:, 1:-1] + jitter, s[:, -1:]], dim=-1)
+    s = stratified_edges(m, spec.env_samples, spec.deterministic, dtype, device)
     u = torch.exp(math.log(spec.env_near) + s * (math.log(spec.env_far) - math.log(spec.env_near)))
     return torch.cat([torch.zeros_like(u[:, :1]), u[:, 1:]], dim=-1)
 
@@ -173,6 +182,39 @@ def render_environment_along(
     w, _ = composite_weights(density, u)
     rgb = (w[..., None] * radiance).sum(-2)
     return rgb, quantile_depth(w, u, spec.depth_quantile), w, normalized_distance(u, spec)
+
+
+def free_space_opacity(
+    env: EnvironmentField,
+    origins: torch.Tensor,
+    dirs: torch.Tensor,
+    radii: torch.Tensor,
+    spec: RenderSpec,
+) -> torch.Tensor:
+    """Opacity the environment field puts between each camera and the object, along object rays.
+
+    A pixel the mask calls object sees the object unoccluded, so the environment must be empty from the
+    camera to the object's bounding sphere. Nothing else says so: object pixels are rendered from the SDF
+    alone, and background rays see each patch of the room from one side, so the field is free to explain a
+    photo's background with density just before its lens, in space that the neighbouring cameras' object
+    rays cross. ``spec.free_space_samples`` stratified frustums from the camera to the sphere's entry.
+
+    Args:
+        origins, dirs: ``(N, 3)`` camera rays (unit directions); radii: ``(N,)`` pixel cone radius per unit
+            distance.
+    Returns:
+        ``1 - exp(-∫ σ)`` over that segment, ``(N,)``; 0 for rays that start inside the sphere or miss it.
+    """
+    if env.directional:  # a 2D map has no density anywhere
+        return torch.zeros_like(radii)
+    entry, _, hit = ray_sphere_bounds(origins, dirs, spec.object_radius)
+    s = stratified_edges(origins.shape[0], spec.free_space_samples, spec.deterministic, origins.dtype,
+                         origins.device)
+    t = s * torch.where(hit, entry, 0)[:, None]
+    means, variances = conical_frustum_gaussian(origins, dirs, radii, t[:, :-1], t[:, 1:])
+    density, _ = env(means, variances, dirs)
+    _, transmittance = composite_weights(density, t)
+    return 1.0 - transmittance
 
 
 def shade_specular(

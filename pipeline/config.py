@@ -214,6 +214,10 @@ class LossConfig(StrictModel):
         0.1, ge=0, description="background pixels supervise the environment field (beyond the paper); weighed low "
         "so the reflections, the only view of the props' inner sides, are not drowned out (docs/method.md)"
     )
+    free_space: float = Field(
+        0.0, ge=0, description="the environment's opacity between each camera and the object along object rays, "
+        "where a mask says nothing occludes the object (beyond the paper; docs/method.md)"
+    )
     clipped_excess: float = Field(
         0.1, ge=0, le=1, description="clipped (saturated) pixels bound the prediction from below; above, this weak "
         "pull toward the recorded value keeps a light of unrecorded brightness from blooming past its edges"

@@ -179,3 +179,60 @@ def test_a_trained_model_renders_deterministically_with_its_own_fine_samples():
     assert rendering.deterministic and rendering.env_fine == 32
     assert replace(rendering, deterministic=False, env_fine=8) == spec  # nothing else changes
     assert RenderSpec(env_fine=8).for_rendering().env_fine == 8  # no render count: training's
+
+
+class _Fog(torch.nn.Module):
+    """Constant density everywhere; grey."""
+
+    directional = False
+
+    def __init__(self, sigma: float):
+        super().__init__()
+        self.sigma = sigma
+
+    def forward(self, means, variances, dirs):
+        return torch.full(means.shape[:-1], self.sigma), torch.full((*means.shape[:-1], 3), 0.5)
+
+
+def test_free_space_opacity_integrates_density_from_the_camera_to_the_objects_sphere():
+    from orca.render import free_space_opacity
+
+    spec = RenderSpec(free_space_samples=16, deterministic=True)
+    # cameras on the x axis at distance 3 and 6 looking at the centre, one looking past the sphere, one inside
+    origins = torch.tensor([[3.0, 0, 0], [6.0, 0, 0], [3.0, 0, 0], [0.2, 0, 0]])
+    dirs = torch.tensor([[-1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [-1.0, 0, 0]])
+    radii = torch.full((4,), 1e-3)
+    sigma = 0.3
+    opacity = free_space_opacity(_Fog(sigma), origins, dirs, radii, spec)
+    expected = torch.tensor([1 - math.exp(-sigma * 2.0), 1 - math.exp(-sigma * 5.0), 0.0, 0.0])
+    torch.testing.assert_close(opacity, expected, atol=1e-5, rtol=0)
+    # a floater before the lens is seen in full; one behind the object, which the ray never reaches, is not
+    before, behind = _Slab(4.0, 4.5, wall=1e9), _Slab(-4.5, -4.0, wall=1e9)
+    assert free_space_opacity(before, origins[1:2], dirs[1:2], radii[1:2], spec).item() > 0.999
+    assert free_space_opacity(behind, origins[1:2], dirs[1:2], radii[1:2], spec).item() == 0.0
+
+
+def test_free_space_loss_empties_the_environment_between_cameras_and_object():
+    """The objective's ``free_space`` term reaches the environment field and lowers its density there."""
+    from orca.model import Batch, LossWeights, ModelSpec, OrcaModel, objective
+
+    torch.manual_seed(0)
+    model = OrcaModel(ModelSpec(render=RenderSpec(n_coarse=16, n_fine=8, env_samples=8, free_space_samples=8)))
+    n = 64
+    origins = torch.tensor([4.0, 0.0, 0.0]).expand(n, 3) + 0.1 * torch.randn(n, 3)
+    dirs = torch.nn.functional.normalize(-origins + 0.2 * torch.randn(n, 3), dim=-1)
+    batch = Batch(origins, dirs, torch.full((n,), 1e-3), torch.full((n, 3), 0.5), torch.ones(n), torch.ones(n) > 0)
+    weights = LossWeights(
+        photometric=0, mask=0, eikonal=0, orientation=0, distortion=0, background=0, free_space=1.0
+    )
+    optimizer = torch.optim.Adam(model.env_field.parameters(), lr=1e-2)
+    losses = []
+    for _ in range(20):
+        total, terms, _ = objective(model, batch, weights, "mask")
+        assert set(terms) >= {"free_space"}
+        optimizer.zero_grad()
+        total.backward()
+        assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in model.env_field.parameters())
+        optimizer.step()
+        losses.append(terms["free_space"].item())
+    assert losses[0] > 0.05 and losses[-1] < 0.5 * losses[0], losses
