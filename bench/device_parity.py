@@ -62,7 +62,7 @@ def parity(preset: str, rays: int) -> dict:
         b = Batch(*(t.to(device) for t in batch))
         bg = Batch(*(t.to(device) for t in background)) if background is not None else None
         model.zero_grad(set_to_none=True)
-        total, terms, out = objective(model, b, weights, "joint", bg)
+        total, _, out = objective(model, b, weights, "joint", bg)
         total.backward()
         grads = torch.cat([p.grad.flatten() for p in model.parameters() if p.grad is not None])
         results[name] = {
