@@ -170,7 +170,8 @@ rule train:
     """Decoded photos + cameras + masks -> the trained model (SDF, diffuse head, environment field). The cameras
     are the masks stage's (the poses stage's, re-normalized so that the object's tight sphere is the unit
     sphere), for real and synthetic captures alike: evaluation aligns them to the ground truth. When the poses
-    stage resampled the photos to pinhole (poses/undistorted/), training reads those.
+    stage resampled the photos to pinhole (poses/undistorted/), training reads those. Its sparse points
+    (poses/sparse/) give the environment field sparse depth of the surroundings (losses.sparse_depth).
     Checkpoints go to train.checkpoints/ beside the output, so a killed job resumes where it stopped."""
     input:
         decode=RESULTS_DIR / "{capture}" / "decode",
@@ -186,7 +187,8 @@ rule train:
     threads: workflow.cores
     shell:
         "images={input.decode}; if [ -d {input.poses}/undistorted ]; then images={input.poses}/undistorted; fi; "
-        "{ORCA} train --decode $images --cameras {input.masks}/cameras.json --masks {input.masks}/masks "
+        "points=; if [ -d {input.poses}/sparse ]; then points='--points {input.poses}/sparse'; fi; "
+        "{ORCA} train --decode $images --cameras {input.masks}/cameras.json --masks {input.masks}/masks $points "
         "--capture {CAPTURES_DIR}/{wildcards.capture} --out {output} --preset {PRESET} {SET} > {log} 2>&1"
 
 

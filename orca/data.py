@@ -6,8 +6,34 @@ from dataclasses import dataclass
 
 import torch
 
-from .model import Batch
+from .model import Batch, DepthBatch
 from .rays import camera_rays
+
+
+@dataclass
+class SparseDepth:
+    """``P`` pixels of the images whose ray is known to end at a given distance: the sparse points of the
+    surroundings that structure from motion triangulated, projected into the photos that see them.
+
+    Attributes:
+        image: ``(P,)`` long index into the image stack; uv: ``(P, 2)`` the point's projection (pixels);
+        distance: ``(P,)`` from the camera centre to the point along the ray.
+    """
+
+    image: torch.Tensor
+    uv: torch.Tensor
+    distance: torch.Tensor
+
+    def __post_init__(self) -> None:
+        p = self.image.shape[0]
+        if self.uv.shape != (p, 2) or self.distance.shape != (p,):
+            raise ValueError(f"uv {tuple(self.uv.shape)} / distance {tuple(self.distance.shape)} vs {p} points")
+
+    def __len__(self) -> int:
+        return int(self.image.shape[0])
+
+    def to(self, device: torch.device | str) -> SparseDepth:
+        return SparseDepth(self.image.to(device), self.uv.to(device), self.distance.to(device))
 
 
 @dataclass
@@ -19,6 +45,7 @@ class ImageSet:
         masks: ``(N, H, W)`` bool object masks.
         valid: ``(N, H, W)`` bool, False where a highlight clipped.
         K: ``(N, 3, 3)`` intrinsics; c2w: ``(N, 4, 4)`` camera-to-world (OpenCV).
+        depth: optional sparse depth of the surroundings seen in these images.
     """
 
     images: torch.Tensor
@@ -26,6 +53,7 @@ class ImageSet:
     valid: torch.Tensor
     K: torch.Tensor
     c2w: torch.Tensor
+    depth: SparseDepth | None = None
 
     def __post_init__(self) -> None:
         n, h, w, _ = self.images.shape
@@ -44,7 +72,8 @@ class ImageSet:
         return n, h, w
 
     def to(self, device: torch.device | str) -> ImageSet:
-        return ImageSet(*(t.to(device) for t in (self.images, self.masks, self.valid, self.K, self.c2w)))
+        return ImageSet(*(t.to(device) for t in (self.images, self.masks, self.valid, self.K, self.c2w)),
+                        depth=self.depth.to(device) if self.depth is not None else None)
 
     def sample(self, n_rays: int, object_fraction: float, generator: torch.Generator | None = None) -> Batch:
         """Random pixels, ``object_fraction`` of them on the object (the rest anywhere), as a :class:`Batch`."""
@@ -59,6 +88,15 @@ class ImageSet:
         if self._background_idx.numel() == 0:
             return None
         return self._rays(self._pick(self._background_idx, n_rays, generator), generator)
+
+    def sample_depth(self, n_rays: int, generator: torch.Generator | None = None) -> DepthBatch | None:
+        """Random rays of the sparse depth (through the points' projections); None without any."""
+        if self.depth is None or len(self.depth) == 0:
+            return None
+        pick = torch.randint(0, len(self.depth), (n_rays,), generator=generator, device="cpu").to(self.images.device)
+        img = self.depth.image[pick]
+        origins, dirs, radii = camera_rays(self.depth.uv[pick], self.K[img], self.c2w[img])
+        return DepthBatch(origins, dirs, radii, self.depth.distance[pick])
 
     def _pick(self, flat_idx: torch.Tensor, count: int, generator: torch.Generator | None) -> torch.Tensor:
         pick = torch.randint(0, flat_idx.numel(), (count,), generator=generator, device="cpu")

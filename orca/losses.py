@@ -1,4 +1,5 @@
-"""Training losses (the paper's five): photometric, mask, eikonal, normal orientation, distortion.
+"""Training losses: the paper's five (photometric, mask, eikonal, normal orientation, distortion) and ours
+(normal smoothness, sparse depth).
 
 All take per-ray tensors of a batch of ``N`` rays and return scalars.
 """
@@ -72,3 +73,24 @@ def normal_smoothness_loss(normals: torch.Tensor, nearby: torch.Tensor, weights:
 def cone_distortion_loss(env_weights: torch.Tensor, env_s: torch.Tensor) -> torch.Tensor:
     """Distortion loss along virtual cones: weights ``(N, K, E)``, normalized edges ``(N, K, E + 1)``."""
     return distortion_loss(env_weights, env_s).mean()
+
+
+def sparse_depth_loss(
+    weights: torch.Tensor, edges: torch.Tensor, target: torch.Tensor, band: torch.Tensor
+) -> torch.Tensor:
+    """Rays through known points of the surroundings (structure from motion's sparse points) must end there:
+    1 − the share of each ray's weight within ``band`` of its ``target`` distance, an interval's weight taken
+    as spread evenly over it (so a band narrower than the intervals still has a gradient).
+
+    Minimizing it empties the ray before the point and makes it opaque at the point: the line-of-sight prior
+    of Urban Radiance Fields. Nothing is asked of the field behind the point.
+
+    Args:
+        weights: ``(N, E)`` volume-rendering weights; edges: ``(N, E + 1)`` their intervals' distances along the
+            ray; target, band: ``(N,)`` distances.
+    """
+    lo, hi = edges[:, :-1], edges[:, 1:]
+    start, end = (target - band)[:, None], (target + band)[:, None]
+    overlap = (torch.minimum(hi, end) - torch.maximum(lo, start)).clamp_min(0)
+    share = overlap / (hi - lo).clamp_min(1e-12)
+    return (1.0 - (weights * share).sum(-1)).mean()

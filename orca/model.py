@@ -23,8 +23,16 @@ from .losses import (
     normal_orientation_loss,
     normal_smoothness_loss,
     photometric_loss,
+    sparse_depth_loss,
 )
-from .render import RayOutputs, RenderSpec, free_space_opacity, render_environment_along, render_rays
+from .render import (
+    RayOutputs,
+    RenderSpec,
+    environment_weights,
+    free_space_opacity,
+    render_environment_along,
+    render_rays,
+)
 
 
 @dataclass(frozen=True)
@@ -112,6 +120,8 @@ class LossWeights:
     distortion: float = 1e-3
     background: float = 0.1  # background pixels supervise the environment field directly (beyond the paper)
     free_space: float = 0.0  # no environment density between a camera and the object (beyond the paper)
+    sparse_depth: float = 0.0  # rays through sparse points of the surroundings end there (beyond the paper)
+    sparse_depth_band: float = 0.03  # ... within this share of the point's distance
     clipped_excess: float = 0.1  # clipped pixels: weight of a prediction's excess over the recorded value
     smoothness: float = 0.0  # normals at the surface vs a small random step away (beyond the paper)
     smoothness_step: float = 0.01  # the step's standard deviation, in object radii
@@ -128,19 +138,30 @@ class Batch(NamedTuple):
     valid: torch.Tensor  # (N,) not clipped
 
 
+class DepthBatch(NamedTuple):
+    """``N`` rays with the distance at which each should end (sparse points of the surroundings)."""
+
+    origins: torch.Tensor  # (N, 3)
+    dirs: torch.Tensor  # (N, 3)
+    radii: torch.Tensor  # (N,)
+    distance: torch.Tensor  # (N,)
+
+
 Phase = Literal["mask", "joint"]
 
 _OPACITY_EPS = 1e-6
 
 
 def objective(
-    model: OrcaModel, batch: Batch, weights: LossWeights, phase: Phase, background: Batch | None = None
+    model: OrcaModel, batch: Batch, weights: LossWeights, phase: Phase, background: Batch | None = None,
+    depth: DepthBatch | None = None,
 ) -> tuple[torch.Tensor, dict[str, torch.Tensor], RayOutputs]:
     """Weighted loss of a batch; ``phase="mask"`` trains geometry from silhouettes only (warm-up).
 
     The background term (environment field vs. the batch's off-object pixels, plus the optional
     ``background`` batch of off-object pixels) runs in both phases: it does not touch the object, and
     off-object rays are cheap (no SDF), so the room can be learned from more of them than object rays.
+    So does the sparse-depth term (``depth``: rays through known points of the surroundings).
 
     Returns:
         total loss, the unweighted terms (detached, for logging), and the render.
@@ -178,6 +199,10 @@ def objective(
             near = model.spec.background_near * origins.norm(dim=-1)  # the object's centre is the origin
             env_rgb, _ = model.environment(origins, dirs, radii, near)
             terms["background"] = photometric_loss(env_rgb, rgb, valid, ~valid, weights.clipped_excess)
+    if weights.sparse_depth > 0 and depth is not None and not model.env_field.directional:
+        w, edges, _ = environment_weights(model.env_field, depth.origins, depth.dirs, depth.radii,
+                                          torch.zeros_like(depth.radii), model.spec.render)
+        terms["sparse_depth"] = sparse_depth_loss(w, edges, depth.distance, weights.sparse_depth_band * depth.distance)
     total = sum(getattr(weights, k) * v for k, v in terms.items())
     return total, {k: v.detach() for k, v in terms.items()}, out
 

@@ -165,13 +165,36 @@ def render_environment_along(
         field gives infinite depth and zero weights.
     """
     m = apex.shape[0]
-    u = environment_edges(spec, m, apex.dtype, apex.device)
     if env.directional:  # a 2D map: no depth, nothing along the cone to weigh
         rgb = env.radiance_at_infinity(axis, radius_growth)
         depth = torch.full_like(radius_growth, math.inf)
         e = spec.env_samples + spec.env_fine
         s = torch.linspace(0, 1, e + 1, dtype=apex.dtype, device=apex.device).expand(m, -1)
         return rgb, depth, torch.zeros(m, e, dtype=apex.dtype, device=apex.device), s
+    w, u, radiance = environment_weights(env, apex, axis, radius_growth, t_start, spec, solid)
+    rgb = (w[..., None] * radiance).sum(-2)
+    return rgb, quantile_depth(w, u, spec.depth_quantile), w, normalized_distance(u, spec)
+
+
+def environment_weights(
+    env: EnvironmentField,
+    apex: torch.Tensor,
+    axis: torch.Tensor,
+    radius_growth: torch.Tensor,
+    t_start: torch.Tensor,
+    spec: RenderSpec,
+    solid: Solid | None = None,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The volume-rendering weights of a (non-directional) environment field along cones, coarse-to-fine as
+    :func:`render_environment_along` describes.
+
+    Args:
+        apex, axis: ``(M, 3)``; radius_growth, t_start: ``(M,)``.
+    Returns:
+        weights ``(M, E)``, their intervals' edges ``(M, E + 1)`` as distances past ``t_start``, and the
+        frustums' radiance ``(M, E, 3)``.
+    """
+    u = environment_edges(spec, apex.shape[0], apex.dtype, apex.device)
     if spec.env_fine > 0:
         with torch.no_grad():
             density, _ = _frustums(env, apex, axis, radius_growth, t_start, u, solid)
@@ -180,8 +203,7 @@ def render_environment_along(
         u = torch.sort(torch.cat([u, fine], dim=-1), dim=-1).values
     density, radiance = _frustums(env, apex, axis, radius_growth, t_start, u, solid)
     w, _ = composite_weights(density, u)
-    rgb = (w[..., None] * radiance).sum(-2)
-    return rgb, quantile_depth(w, u, spec.depth_quantile), w, normalized_distance(u, spec)
+    return w, u, radiance
 
 
 def free_space_opacity(

@@ -222,6 +222,11 @@ class LossConfig(StrictModel):
         0.1, ge=0, le=1, description="clipped (saturated) pixels bound the prediction from below; above, this weak "
         "pull toward the recorded value keeps a light of unrecorded brightness from blooming past its edges"
     )
+    sparse_depth: float = Field(
+        0.0, ge=0, description="rays through the poses stage's sparse points of the surroundings end there "
+        "(`orca train --points`; beyond the paper; docs/method.md)"
+    )
+    sparse_depth_band: float = Field(0.03, gt=0, lt=1, description="... within this share of the point's distance")
     smoothness: float = Field(0.1, ge=0, description="normals at the surface vs a small random step away")
     smoothness_step: float = Field(0.01, gt=0, description="that step's standard deviation (object radii)")
 
@@ -243,6 +248,10 @@ class TrainConfig(StrictModel):
         0.0, ge=0, lt=1, description="background rays start this fraction of the way from their camera to the "
         "object's centre (no samples right before the lens, where floaters explain a photo's background); off "
         "by default: it helped an environment-only fit but not joint training (docs/method.md)"
+    )
+    depth_rays: int = Field(512, ge=0, description="rays through sparse points per iteration (losses.sparse_depth)")
+    depth_object_margin_px: int = Field(
+        4, ge=0, description="a sparse point seen this close to the object's mask in any photo is not used"
     )
     checkpoint_every: int = Field(500, ge=1)
     preview_every: int = Field(1000, ge=1)

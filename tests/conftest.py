@@ -79,6 +79,20 @@ def sfm_sphere_decode(sfm_sphere_capture, tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def sfm_sphere_poses(sfm_sphere_capture, sfm_sphere_decode, tmp_path_factory):
+    """The poses stage (SfM) on the sphere capture: (its result, its folder, seconds taken)."""
+    import time
+
+    from pipeline.config import PosesConfig
+    from pipeline.stages.poses import run_poses
+
+    out = tmp_path_factory.mktemp("sfm_sphere_poses") / "poses"
+    started = time.time()
+    result = run_poses(sfm_sphere_capture, sfm_sphere_decode, out, PosesConfig(num_threads=2))
+    return result, out, time.time() - started
+
+
+@pytest.fixture(scope="session")
 def sfm_torus_capture(tmp_path_factory) -> Path:
     """20 views of the glossy torus (non-convex) at 320x240, 4 samples per pixel (~30 s to render)."""
     return _sfm_capture(tmp_path_factory, "torus", views=20, spp=4, seed=1)

@@ -91,3 +91,22 @@ def test_normal_smoothness_is_zero_on_a_plane_and_grows_with_bumps():
     weights = torch.cat([torch.ones(32), torch.zeros(32)])
     mixed = torch.cat([n[:32], more[32:]])
     assert normal_smoothness_loss(n, mixed, weights) == 0
+
+
+def test_sparse_depth_loss_is_the_weight_missing_from_the_band():
+    from orca.losses import sparse_depth_loss
+
+    edges = torch.tensor([[0.0, 1.0, 2.0, 3.0, 4.0]])
+    target, band = torch.tensor([2.5]), torch.tensor([0.5])  # the band is exactly the third interval
+    at_point = torch.tensor([[0.0, 0.0, 1.0, 0.0]])
+    before = torch.tensor([[1.0, 0.0, 0.0, 0.0]])
+    split = torch.tensor([[0.0, 0.5, 0.5, 0.0]])
+    assert sparse_depth_loss(at_point, edges, target, band) == 0
+    assert sparse_depth_loss(before, edges, target, band) == 1
+    assert sparse_depth_loss(split, edges, target, band) == pytest.approx(0.5)
+    # a band narrower than its interval counts the interval's weight pro rata, and keeps a gradient
+    w = torch.tensor([[0.0, 0.0, 1.0, 0.0]], requires_grad=True)
+    narrow = sparse_depth_loss(w, edges, target, torch.tensor([0.1]))
+    assert narrow.item() == pytest.approx(0.8)
+    narrow.backward()
+    assert w.grad[0, 2] == pytest.approx(-0.2) and w.grad[0, [0, 1, 3]].eq(0).all()

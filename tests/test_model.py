@@ -182,3 +182,45 @@ def test_background_rays_start_part_way_to_the_object_so_a_floater_at_the_lens_e
         _, depth = model.environment(batch.origins, batch.dirs, batch.radii, torch.full((n,), 4.0 * near))
         assert bool((depth > 4.0 * near).all())  # ray depth from the camera, not from the near bound
     assert losses[0.0] > 0.1 and losses[0.25] < 0.01, losses  # white fog vs the grey wall (0.001: the loss floor)
+
+
+def test_sparse_depth_places_the_environment_where_the_points_are():
+    """Rays from a ring of cameras through points on a sphere of radius 3 (a room's walls): a few hundred
+    steps of the sparse-depth term alone move the field's depth there from its initial fog."""
+    from orca.model import DepthBatch
+
+    torch.manual_seed(0)
+    model = _model()
+    spec = RenderSpec(env_samples=32, env_fine=16, depth_quantile=0.5)
+    model = OrcaModel(ModelSpec(sdf=model.spec.sdf, env=model.spec.env, render=spec))
+    g = torch.Generator().manual_seed(1)
+
+    def rays(n):
+        o = torch.nn.functional.normalize(torch.randn(n, 3, generator=g), dim=-1) * 1.5
+        d = torch.nn.functional.normalize(torch.randn(n, 3, generator=g), dim=-1)
+        b = (o * d).sum(-1)
+        t = -b + torch.sqrt(b**2 - (o.square().sum(-1) - 9.0))  # where each ray leaves the radius-3 sphere
+        return DepthBatch(o, d, torch.full((n,), 1e-3), t)
+
+    test = rays(256)
+
+    def depth_error():
+        with torch.no_grad():
+            _, depth = model.environment(test.origins, test.dirs, test.radii)
+        return ((depth - test.distance).abs() / test.distance).median().item()
+
+    before = depth_error()
+    weights = LossWeights(photometric=0, mask=0, eikonal=0, background=0, sparse_depth=1.0)
+    optimizer = torch.optim.Adam(model.env_field.parameters(), lr=1e-2)
+    few = _batch(8)  # the object terms are weighed 0; only the sparse-depth rays teach the field
+    losses = []
+    for _ in range(150):
+        total, terms, _ = objective(model, few, weights, "mask", depth=rays(256))
+        losses.append(terms["sparse_depth"].item())
+        optimizer.zero_grad()
+        total.backward()
+        optimizer.step()
+    after = depth_error()
+    print(f"median relative depth error {before:.3f} -> {after:.3f}, loss {losses[0]:.3f} -> {losses[-1]:.3f}")
+    assert losses[-1] < 0.6 * losses[0], losses  # measured: 0.97 -> 0.52 (a coarse grid: not all in the band)
+    assert after < 0.05 and after < 0.2 * before, (before, after)  # measured: 0.27 -> 0.02

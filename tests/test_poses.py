@@ -201,10 +201,8 @@ def test_known_cameras_that_match_no_photo_are_refused(tiny_capture, tiny_decode
 
 
 @pytest.mark.slow
-def test_sphere_capture_registers_every_view_accurately(sfm_sphere_capture, sfm_sphere_decode, tmp_path):
-    started = time.time()
-    result = run(sfm_sphere_capture, sfm_sphere_decode, tmp_path / "poses")
-    seconds = time.time() - started
+def test_sphere_capture_registers_every_view_accurately(sfm_sphere_capture, sfm_sphere_poses):
+    result, out, seconds = sfm_sphere_poses
     truth = load_cameras(sfm_sphere_capture / "ground_truth" / "cameras.json")
     assert result.source == "sfm" and result.registered == result.total == len(truth) == 20
     err = errors_against_truth(result.cameras, truth)
@@ -214,7 +212,6 @@ def test_sphere_capture_registers_every_view_accurately(sfm_sphere_capture, sfm_
     assert err["object_centre_offset"] <= 0.02, err
     assert 0.4 < err["true_radius_normalized"] <= 1.0, err  # the object fits in the unit sphere, not lost in it
 
-    out = tmp_path / "poses"
     for f in ("cameras.json", "transforms.json", "poses_report.json", "poses.png", "manifest.json",
               "sparse/images.bin", "sparse/points3D.bin"):
         assert (out / f).is_file(), f
@@ -230,6 +227,24 @@ def test_sphere_capture_registers_every_view_accurately(sfm_sphere_capture, sfm_
     assert all((out / c.image).is_file() and c.image.endswith(".exr") for c in cams.cameras)
     assert load_poses(out).reconstruction().num_reg_images() == 20
     assert np.allclose(np.asarray(cams.frame.to_colmap)[3], [0, 0, 0, 1])
+
+    # the sparse points, moved into the cameras' frame, land on their own features in every photo that saw them
+    from pipeline.sfm import stem_of
+    from pipeline.sparse_depth import load_sparse_points
+
+    points = load_sparse_points(out / "sparse", cams)
+    assert len(points.xyz) > 300 and all(len(o) >= 3 for o in points.observers)
+    rec, by_name = load_poses(out).reconstruction(), cams.by_name()
+    row = {pid: k for k, pid in enumerate(points.ids)}
+    errors = []
+    for image in rec.images.values():
+        cam = by_name[stem_of(image.name)]
+        w2c = np.linalg.inv(cam.c2w)
+        for p2d in image.points2D:
+            if p2d.has_point3D() and p2d.point3D_id in row:
+                p = w2c[:3, :3] @ points.xyz[row[p2d.point3D_id]] + w2c[:3, 3]
+                errors.append(np.linalg.norm(cam.K[:2, :2] @ (p[:2] / p[2]) + cam.K[:2, 2] - np.asarray(p2d.xy)))
+    assert len(errors) > 1000 and np.median(errors) < 0.5, (len(errors), np.median(errors))
 
 
 @pytest.mark.slow

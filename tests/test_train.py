@@ -171,3 +171,30 @@ def test_training_lowers_the_loss_on_the_tiny_capture(tiny_capture, tiny_decode,
     rows = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
     mask = np.array([r["mask"] for r in rows])
     assert mask[15:20].mean() < 0.7 * mask[:5].mean(), "the silhouette warm-up lowers the mask loss"
+
+
+@pytest.mark.slow
+def test_the_poses_stages_points_give_sparse_depth(sfm_sphere_capture, sfm_sphere_decode, sfm_sphere_poses, tmp_path):
+    """`--points`: the SfM points of the room, off the object, become rays whose depth the field is taught."""
+    from pipeline.stages.train import load_image_set
+
+    _, poses, _ = sfm_sphere_poses
+    masks = sfm_sphere_capture / "ground_truth" / "masks"
+    data, names = load_image_set(sfm_sphere_decode, poses / "cameras.json", masks, poses / "sparse")
+    depth = data.depth
+    assert depth is not None and len(depth) > 1000 and set(depth.image.tolist()) == set(range(len(names)))
+    # every ray goes through a pixel off the object (the points seen on it were dropped)
+    col, row = depth.uv[:, 0].long(), depth.uv[:, 1].long()
+    assert not data.masks[depth.image, row, col].any()
+    # the room is around the object, beyond it: no point inside the object's sphere (radius ~0.64 here)
+    from orca.rays import camera_rays
+
+    origins, dirs, _ = camera_rays(depth.uv, data.K[depth.image], data.c2w[depth.image])
+    ends = origins + depth.distance[:, None] * dirs
+    assert ends.norm(dim=-1).min() > 0.6
+
+    out = tmp_path / "train"
+    result = run_train(sfm_sphere_decode, poses / "cameras.json", masks, out,
+                       _cfg("train.losses.sparse_depth=0.1", "train.depth_rays=32"), points_dir=poses / "sparse")
+    assert result is not None and 0 < result.final_losses["sparse_depth"] <= 1
+    assert json.loads((out / "train_report.json").read_text())["sparse_depth_pixels"] == len(depth)

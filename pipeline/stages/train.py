@@ -49,8 +49,10 @@ class TrainResult:
 # ------------------------------------------------------------------------------------------------ data
 
 
-def load_image_set(decode_dir: Path, cameras_path: Path, masks_dir: Path):
-    """Decoded images matched by name to cameras and masks, intrinsics scaled to the decoded size.
+def load_image_set(decode_dir: Path, cameras_path: Path, masks_dir: Path, points_dir: Path | None = None,
+                   object_margin_px: int = 4):
+    """Decoded images matched by name to cameras and masks, intrinsics scaled to the decoded size, and the
+    sparse depth of the surroundings when ``points_dir`` (the poses stage's COLMAP model) is given.
 
     Returns:
         (``orca.data.ImageSet`` in float32 on the CPU, the image names).
@@ -63,7 +65,8 @@ def load_image_set(decode_dir: Path, cameras_path: Path, masks_dir: Path):
     from ..results import load_decode
 
     decoded = load_decode(decode_dir)
-    cams = load_cameras(cameras_path).by_name()
+    camera_set = load_cameras(cameras_path)
+    cams = camera_set.by_name()
     names = [n for n in decoded.names if n in cams]
     missing = [n for n in decoded.names if n not in cams]
     if missing:
@@ -104,7 +107,32 @@ def load_image_set(decode_dir: Path, cameras_path: Path, masks_dir: Path):
     if not any(m.any() for m in masks):
         raise InputError("every mask is empty", masks_dir, "check the masks stage output (the object was not found)")
     t = lambda a, dt=torch.float32: torch.from_numpy(np.stack(a)).to(dt)  # noqa: E731
-    return ImageSet(t(images), t(masks, torch.bool), t(valid, torch.bool), t(Ks), t(c2ws)), names
+    depth = None
+    if points_dir is not None:
+        depth = _sparse_depth(points_dir, camera_set, names, np.stack(Ks), np.stack(c2ws), np.stack(masks),
+                              object_margin_px)
+    return ImageSet(t(images), t(masks, torch.bool), t(valid, torch.bool), t(Ks), t(c2ws), depth=depth), names
+
+
+def _sparse_depth(points_dir: Path, cameras, names: list[str], K: np.ndarray, c2w: np.ndarray, masks: np.ndarray,
+                  object_margin_px: int):
+    """``orca.data.SparseDepth`` from the poses stage's points (see pipeline.sparse_depth)."""
+    import torch
+
+    from orca.data import SparseDepth
+
+    from ..sparse_depth import depth_observations, load_sparse_points
+
+    points = load_sparse_points(points_dir, cameras)
+    obs = depth_observations(points, names, K, c2w, masks, object_margin_px)
+    log.info("sparse depth: %d of %d points of the surroundings (%d dropped: seen on or next to the object), "
+             "%d pixels, median distance %.2f", obs.points_used, len(points.xyz), obs.points_on_object,
+             len(obs.distance), float(np.median(obs.distance)) if len(obs.distance) else float("nan"))
+    if not len(obs.distance):
+        log.warning("no sparse point of the surroundings projects into the photos off the object (%s): training "
+                    "goes on without sparse depth", points_dir)
+    return SparseDepth(torch.from_numpy(obs.image), torch.from_numpy(obs.uv).float(),
+                       torch.from_numpy(obs.distance).float())
 
 
 # ----------------------------------------------------------------------------------------------- model
@@ -236,10 +264,11 @@ def load_weights(model, state: dict[str, Any], path: Path) -> None:
 
 def training_identity(cfg: TrainConfig, data) -> dict[str, Any]:
     """What a checkpoint's iterations depend on: the config (but the keys of ``_RESUME_NEUTRAL_KEYS``) and a
-    hash of the training data (images, masks, clipped pixels, cameras) as the model sees them."""
+    hash of the training data (images, masks, clipped pixels, cameras, sparse depth) as the model sees them."""
     config = {k: v for k, v in cfg.model_dump(mode="json").items() if k not in _RESUME_NEUTRAL_KEYS}
     digest = hashlib.sha256()
-    for tensor in (data.images, data.masks, data.valid, data.K, data.c2w):
+    depth = () if data.depth is None else (data.depth.image, data.depth.uv, data.depth.distance)
+    for tensor in (data.images, data.masks, data.valid, data.K, data.c2w, *depth):
         digest.update(str(tuple(tensor.shape)).encode())
         digest.update(tensor.detach().cpu().contiguous().numpy().tobytes())
     return {"config": config, "data": digest.hexdigest()}
@@ -308,12 +337,15 @@ def run_train(
     out_dir: Path,
     cfg: TrainConfig,
     *,
+    points_dir: Path | None = None,
     restart: bool = False,
     max_steps: int | None = None,
 ) -> TrainResult | None:
     """Train (or resume training) and write the train folder when the last iteration is done.
 
     Args:
+        points_dir: the poses stage's COLMAP model (``sparse/``): sparse depth of the surroundings for the
+            ``losses.sparse_depth`` term.
         max_steps: stop after this many iterations in this call (checkpointing first) without finishing:
             returns None. For time-boxed runs and tests of resuming.
     """
@@ -324,10 +356,13 @@ def run_train(
     started = time.time()
     device = resolve_device(cfg.device)
     torch.manual_seed(cfg.seed)
-    data, names = load_image_set(decode_dir, cameras_path, masks_dir)
+    data, names = load_image_set(decode_dir, cameras_path, masks_dir, points_dir, cfg.depth_object_margin_px)
     n_img, height, width = data.shape
     log.info("train: %d images %dx%d, %d object pixels, device %s, %d iterations", n_img, width, height,
              int(data.masks.sum()), device, cfg.iterations)
+    if cfg.losses.sparse_depth > 0 and data.depth is None:
+        log.warning("train.losses.sparse_depth is %g but no sparse points were given (--points): the term is off",
+                    cfg.losses.sparse_depth)
     identity = training_identity(cfg, data)
     data = data.to(device)
     model = OrcaModel(model_spec(cfg)).to(device)
@@ -360,6 +395,8 @@ def run_train(
     generator = torch.Generator().manual_seed(cfg.seed * 1_000_003 + step)
     # off-object rays draw from their own stream: the object's batches do not depend on background_rays
     background_generator = torch.Generator().manual_seed(cfg.seed * 1_000_003 + step + 7_919)
+    depth_generator = torch.Generator().manual_seed(cfg.seed * 1_000_003 + step + 104_729)
+    use_depth = cfg.depth_rays > 0 and cfg.losses.sparse_depth > 0 and data.depth is not None and len(data.depth)
 
     from torch.utils.tensorboard import SummaryWriter
 
@@ -382,7 +419,8 @@ def run_train(
                 batch = data.sample(cfg.batch_rays, cfg.object_fraction, generator)
                 background = (data.sample_background(cfg.background_rays, background_generator)
                               if cfg.background_rays else None)
-                total, terms, out = objective(model, batch, weights, phase, background)
+                depth = data.sample_depth(cfg.depth_rays, depth_generator) if use_depth else None
+                total, terms, out = objective(model, batch, weights, phase, background, depth)
                 if not torch.isfinite(total):
                     bad = ", ".join(k for k, v in terms.items() if not torch.isfinite(v)) or "total"
                     raise TrainingDiverged(
@@ -450,6 +488,7 @@ def run_train(
             "iterations": step, "images": names, "size": [width, height], "device": str(device),
             "seconds_this_run": round(seconds, 2), "training_seconds": round(seconds_before + seconds, 2),
             "final_losses": final_losses, "beta": model.beta.item(),
+            "sparse_depth_pixels": len(data.depth) if data.depth is not None else 0,
         })
         write_manifest(tmp, stage="train", inputs={"cameras": cameras_path, "decode": decode_dir / "decode.json"},
                        config=cfg.model_dump(), started=started)
@@ -501,6 +540,8 @@ def register(subparsers: Any) -> None:
                    help="a synthetic capture's ground_truth/ folder: its cameras.json and masks/ are used")
     p.add_argument("--capture", type=Path, default=None,
                    help="the capture folder: its capture.yaml (if any) configures training")
+    p.add_argument("--points", type=Path, default=None,
+                   help="the poses stage's COLMAP model (poses/sparse): sparse depth of the surroundings")
     p.add_argument("--out", type=Path, default=None, help="output folder (default: beside --decode, train/)")
     p.add_argument("--device", choices=["auto", "cpu", "cuda"], default=None, help="overrides train.device")
     p.add_argument("--restart", action="store_true", help="discard checkpoints and train from scratch")
@@ -520,4 +561,5 @@ def main(args: argparse.Namespace) -> TrainResult | None:
     config = config_from_arguments(args, "train", capture_yaml)
     cfg = config.train if args.device is None else config.train.model_copy(update={"device": args.device})
     out = args.out if args.out is not None else Path(args.decode).parent / "train"
-    return run_train(Path(args.decode), Path(cameras), Path(masks), out, cfg, restart=args.restart)
+    return run_train(Path(args.decode), Path(cameras), Path(masks), out, cfg, points_dir=args.points,
+                     restart=args.restart)

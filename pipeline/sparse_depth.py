@@ -1,0 +1,123 @@
+"""Sparse depth of the surroundings: the poses stage's structure-from-motion points, in the training cameras'
+frame, projected into the photos that saw them, off the object.
+
+The room is what the photos see around a glossy object, and structure from motion triangulated thousands of
+its points (walls, floor, props) to a fraction of a pixel. Training uses them to tell the environment field
+where the rays through them end (``orca.losses.sparse_depth_loss``): without it the field is free to put a
+wall at whatever depth explains one photo's pixels best, and floaters before the lenses do exactly that.
+Points that any of their photos see on or next to the object are dropped: features there are the object's
+texture or, worse, reflections, which triangulate to places where nothing is.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .cameras import CameraSet
+from .errors import InputError
+
+log = logging.getLogger("orca.sparse_depth")
+
+
+@dataclass(frozen=True)
+class SparsePoints:
+    """``M`` triangulated points and the photos (names without extension) whose features made each."""
+
+    xyz: np.ndarray  # (M, 3) in the frame of the cameras they were loaded for
+    observers: list[list[str]]
+    ids: list[int] | None = None  # COLMAP's point3D ids, when loaded from a model
+
+
+def load_sparse_points(sparse_dir: Path, cameras: CameraSet, min_track: int = 3) -> SparsePoints:
+    """The points of a COLMAP model (the poses stage's ``sparse/``) seen in at least ``min_track`` photos,
+    moved into the frame of ``cameras`` (through its ``frame.to_colmap``)."""
+    import pycolmap
+
+    from .sfm import stem_of
+
+    sparse_dir = Path(sparse_dir)
+    if not (sparse_dir / "points3D.bin").is_file() and not (sparse_dir / "points3D.txt").is_file():
+        raise InputError("no COLMAP points3D here", sparse_dir, "pass the poses stage's sparse/ folder")
+    if cameras.frame.to_colmap is None:
+        raise InputError("the cameras record no to_colmap transform, so the sparse points cannot be placed in "
+                         "their frame", sparse_dir, "use the poses or masks stage's cameras.json with --points")
+    try:
+        rec = pycolmap.Reconstruction(str(sparse_dir))
+    except Exception as e:  # noqa: BLE001 - pycolmap raises plain RuntimeErrors for unreadable models
+        raise InputError(f"cannot read the COLMAP model: {e}", sparse_dir, "rerun the poses stage") from e
+    names = {image_id: stem_of(image.name) for image_id, image in rec.images.items()}
+    xyz, observers, ids = [], [], []
+    for point_id, point in rec.points3D.items():
+        if point.track.length() >= min_track:
+            ids.append(int(point_id))
+            xyz.append(point.xyz)
+            observers.append(sorted({names[e.image_id] for e in point.track.elements}))
+    from_colmap = np.linalg.inv(np.asarray(cameras.frame.to_colmap, dtype=np.float64))
+    points = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+    points = points @ from_colmap[:3, :3].T + from_colmap[:3, 3]
+    return SparsePoints(points, observers, ids)
+
+
+@dataclass(frozen=True)
+class DepthObservations:
+    """``P`` pixels whose rays end at known distances."""
+
+    image: np.ndarray  # (P,) int64 index into the image list
+    uv: np.ndarray  # (P, 2) pixel coordinates (COLMAP convention: (0, 0) is the top-left corner)
+    distance: np.ndarray  # (P,) from the camera centre
+    points_used: int
+    points_on_object: int
+
+
+def depth_observations(
+    points: SparsePoints, names: Sequence[str], K: np.ndarray, c2w: np.ndarray, masks: np.ndarray,
+    object_margin_px: int,
+) -> DepthObservations:
+    """Project each point into the photos that saw it; drop points that land within ``object_margin_px`` of
+    the object's mask in any of them.
+
+    Args:
+        names: ``N`` image names; K ``(N, 3, 3)``, c2w ``(N, 4, 4)``, masks ``(N, H, W)`` bool, as trained on.
+    """
+    index = {n: i for i, n in enumerate(names)}
+    n, h, w = masks.shape
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * object_margin_px + 1,) * 2)
+    near_object = np.stack([cv2.dilate(m.astype(np.uint8), kernel) > 0 for m in masks])
+    w2c = np.linalg.inv(c2w)
+    image, uv, distance = [], [], []
+    used = on_object = 0
+    for x, seen_by in zip(points.xyz, points.observers):
+        rows = []
+        touches_object = False
+        for name in seen_by:
+            i = index.get(name)
+            if i is None:
+                continue
+            p = w2c[i, :3, :3] @ x + w2c[i, :3, 3]
+            if p[2] <= 0:
+                continue
+            u, v = (K[i, :2, :2] @ (p[:2] / p[2])) + K[i, :2, 2]
+            col, row = int(np.floor(u)), int(np.floor(v))
+            if not (0 <= col < w and 0 <= row < h):
+                continue
+            if near_object[i, row, col]:
+                touches_object = True
+                break
+            rows.append((i, u, v, float(np.linalg.norm(p))))
+        if touches_object:
+            on_object += 1
+            continue
+        if rows:
+            used += 1
+            for i, u, v, d in rows:
+                image.append(i)
+                uv.append((u, v))
+                distance.append(d)
+    return DepthObservations(np.asarray(image, np.int64), np.asarray(uv, np.float64).reshape(-1, 2),
+                             np.asarray(distance, np.float64), used, on_object)
