@@ -36,7 +36,9 @@ class SparsePoints:
 
 def load_sparse_points(sparse_dir: Path, cameras: CameraSet, min_track: int = 3) -> SparsePoints:
     """The points of a COLMAP model (the poses stage's ``sparse/``) seen in at least ``min_track`` photos,
-    moved into the frame of ``cameras`` (through its ``frame.to_colmap``)."""
+    moved into the frame of ``cameras``: through its ``frame.to_colmap`` when it records one (the poses and
+    masks stages' cameras), else by the similarity between the model's camera centres and theirs (known or
+    ground-truth cameras of the same photos)."""
     import pycolmap
 
     from .sfm import stem_of
@@ -44,24 +46,53 @@ def load_sparse_points(sparse_dir: Path, cameras: CameraSet, min_track: int = 3)
     sparse_dir = Path(sparse_dir)
     if not (sparse_dir / "points3D.bin").is_file() and not (sparse_dir / "points3D.txt").is_file():
         raise InputError("no COLMAP points3D here", sparse_dir, "pass the poses stage's sparse/ folder")
-    if cameras.frame.to_colmap is None:
-        raise InputError("the cameras record no to_colmap transform, so the sparse points cannot be placed in "
-                         "their frame", sparse_dir, "use the poses or masks stage's cameras.json with --points")
     try:
         rec = pycolmap.Reconstruction(str(sparse_dir))
     except Exception as e:  # noqa: BLE001 - pycolmap raises plain RuntimeErrors for unreadable models
         raise InputError(f"cannot read the COLMAP model: {e}", sparse_dir, "rerun the poses stage") from e
     names = {image_id: stem_of(image.name) for image_id, image in rec.images.items()}
+    if cameras.frame.to_colmap is not None:
+        from_colmap = np.linalg.inv(np.asarray(cameras.frame.to_colmap, dtype=np.float64))
+    else:
+        centres = {names[i]: image.projection_center() for i, image in rec.images.items() if image.has_pose}
+        from_colmap = _frame_from_centres(centres, cameras, sparse_dir)
     xyz, observers, ids = [], [], []
     for point_id, point in rec.points3D.items():
         if point.track.length() >= min_track:
             ids.append(int(point_id))
             xyz.append(point.xyz)
             observers.append(sorted({names[e.image_id] for e in point.track.elements}))
-    from_colmap = np.linalg.inv(np.asarray(cameras.frame.to_colmap, dtype=np.float64))
     points = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
     points = points @ from_colmap[:3, :3].T + from_colmap[:3, 3]
     return SparsePoints(points, observers, ids)
+
+
+# A model whose camera centres fit the given ones worse than this (RMS, as a share of the centres' spread) is
+# of other photos or another scene; SfM of the same photos fits to ~0.1 %.
+CENTRE_FIT_TOLERANCE = 0.01
+
+
+def _frame_from_centres(centres: dict[str, np.ndarray], cameras: CameraSet, sparse_dir: Path) -> np.ndarray:
+    """``(4, 4)`` similarity from the model's frame to the cameras', fitted on the centres of the photos both
+    have."""
+    from .alignment import fit_similarity
+
+    given = cameras.by_name()
+    common = sorted(set(centres) & set(given))
+    if len(common) < 3:
+        raise InputError(f"the COLMAP model shares {len(common)} photo(s) with the cameras (3 needed to place its "
+                         "points in their frame)", sparse_dir, "pass the poses stage's model of the same capture")
+    src = np.stack([centres[n] for n in common])
+    dst = np.stack([given[n].center for n in common])
+    fit = fit_similarity(src, dst)
+    rms = float(np.sqrt(((fit.apply(src) - dst) ** 2).sum(-1).mean()))
+    spread = float(np.sqrt(((dst - dst.mean(0)) ** 2).sum(-1).mean()))
+    if rms > CENTRE_FIT_TOLERANCE * spread:
+        raise InputError(f"the COLMAP model's cameras do not fit the given ones (centre RMS {rms / spread:.1%} of "
+                         "their spread after a similarity)", sparse_dir, "pass the model of the same photos")
+    log.info("sparse points placed by a similarity fitted on %d camera centres (RMS %.2g of their spread)",
+             len(common), rms / spread)
+    return fit.matrix
 
 
 @dataclass(frozen=True)

@@ -74,3 +74,26 @@ def test_sampled_depth_rays_end_at_their_points():
     nearest = (ends[:, None] - f(room)[None]).norm(dim=-1).min(dim=1).values
     assert nearest.max() < 1e-4, nearest.max()
     assert data.to("cpu").depth is not None
+
+
+def test_a_model_without_to_colmap_is_placed_by_its_camera_centres(tmp_path):
+    import pytest
+
+    from pipeline.alignment import Similarity
+    from pipeline.cameras import Camera, CameraSet
+    from pipeline.errors import InputError
+    from pipeline.sparse_depth import _frame_from_centres
+
+    rng = np.random.default_rng(1)
+    centres = rng.normal(size=(6, 3)) * 3
+    truth = Similarity(0.5, look_at(np.array([1.0, 2, 3]), np.zeros(3))[:3, :3], np.array([1.0, -2, 0.5]))
+    cams = CameraSet(cameras=[
+        Camera(name=f"v{i}", image=f"v{i}.png", width=W, height=H, fx=70, fy=70, cx=W / 2, cy=H / 2,
+               camera_to_world=look_at(truth.apply(c), np.zeros(3)).tolist()) for i, c in enumerate(centres)])
+    model = {f"v{i}": c for i, c in enumerate(centres)}
+    np.testing.assert_allclose(_frame_from_centres(model, cams, tmp_path), truth.matrix, atol=1e-9)
+    shuffled = dict(zip(model, centres[::-1]))  # the model of other photos
+    with pytest.raises(InputError, match="do not fit"):
+        _frame_from_centres(shuffled, cams, tmp_path)
+    with pytest.raises(InputError, match="shares 2 photo"):
+        _frame_from_centres({k: model[k] for k in ("v0", "v1")}, cams, tmp_path)
