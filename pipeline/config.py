@@ -250,6 +250,10 @@ class TrainConfig(StrictModel):
         "by default: it helped an environment-only fit but not joint training (docs/method.md)"
     )
     depth_rays: int = Field(512, ge=0, description="rays through sparse points per iteration (losses.sparse_depth)")
+    env_far_from_points: float = Field(
+        1.25, ge=0, description="with sparse points (`--points`), env_far becomes this times the farthest a photo "
+        "saw a point (0: keep env_far)"
+    )
     depth_object_margin_px: int = Field(
         4, ge=0, description="a sparse point seen this close to the object's mask in any photo is not used"
     )

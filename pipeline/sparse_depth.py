@@ -152,3 +152,17 @@ def depth_observations(
                 distance.append(d)
     return DepthObservations(np.asarray(image, np.int64), np.asarray(uv, np.float64).reshape(-1, 2),
                              np.asarray(distance, np.float64), used, on_object)
+
+
+# The farthest points are the first to be outliers (a bad match triangulated near infinity): the bound is taken
+# at this quantile of the distances.
+FAR_QUANTILE = 0.999
+
+
+def far_bound(distance: np.ndarray, factor: float) -> float:
+    """How far environment samples need to reach: ``factor`` times the farthest a photo saw a point (its
+    :data:`FAR_QUANTILE`), as LLFF bounds each image's depth range by its points. Without a bound the field
+    puts what no point pins down (a ceiling only the reflections see) at whatever depth the samples reach."""
+    if not len(distance):
+        raise ValueError("no sparse depth to bound")
+    return float(factor * np.quantile(distance, FAR_QUANTILE))

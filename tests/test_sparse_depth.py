@@ -97,3 +97,14 @@ def test_a_model_without_to_colmap_is_placed_by_its_camera_centres(tmp_path):
         _frame_from_centres(shuffled, cams, tmp_path)
     with pytest.raises(InputError, match="shares 2 photo"):
         _frame_from_centres({k: model[k] for k in ("v0", "v1")}, cams, tmp_path)
+
+
+def test_the_far_bound_is_past_the_farthest_point_but_not_its_outliers():
+    import pytest
+
+    from pipeline.sparse_depth import far_bound
+
+    distance = np.concatenate([np.linspace(1.0, 10.0, 5000), [1e4]])  # one bad match near infinity
+    assert far_bound(distance, 1.25) == pytest.approx(12.5, rel=0.01)
+    with pytest.raises(ValueError):
+        far_bound(np.array([]), 1.25)

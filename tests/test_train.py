@@ -220,3 +220,8 @@ def test_the_poses_stages_points_give_sparse_depth(sfm_sphere_capture, sfm_spher
                        _cfg("train.losses.sparse_depth=0.1", "train.depth_rays=32"), points_dir=poses / "sparse")
     assert result is not None and 0 < result.final_losses["sparse_depth"] <= 1
     assert json.loads((out / "train_report.json").read_text())["sparse_depth_pixels"] == len(depth)
+    # the environment's samples reach just past the farthest point, and the saved model renders with that bound
+    far = json.loads((out / "config.json").read_text())["env_far"]
+    assert far == pytest.approx(1.25 * np.quantile(depth.distance.numpy(), 0.999), rel=1e-3)
+    assert far < 0.5 * load_config(preset="fast").train.env_far
+    assert load_model(out).spec.render.env_far == far

@@ -360,6 +360,17 @@ def run_train(
     n_img, height, width = data.shape
     log.info("train: %d images %dx%d, %d object pixels, device %s, %d iterations", n_img, width, height,
              int(data.masks.sum()), device, cfg.iterations)
+    if data.depth is not None and len(data.depth) and cfg.env_far_from_points > 0:
+        from ..sparse_depth import far_bound
+
+        far = far_bound(data.depth.distance.numpy(), cfg.env_far_from_points)
+        if far <= cfg.env_near:
+            raise InputError(f"the sparse points are all within {far:.3g} of the photos, less than train.env_near "
+                             f"({cfg.env_near})", points_dir, "check the poses stage's model, or set "
+                             "train.env_far_from_points=0")
+        log.info("environment samples reach %.2f (%.2f x the farthest point a photo saw; train.env_far was %g)",
+                 far, cfg.env_far_from_points, cfg.env_far)
+        cfg = cfg.model_copy(update={"env_far": round(far, 4)})
     if cfg.losses.sparse_depth > 0 and data.depth is None:
         log.warning("train.losses.sparse_depth is %g but no sparse points were given (--points): the term is off",
                     cfg.losses.sparse_depth)
