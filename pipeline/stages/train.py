@@ -525,11 +525,13 @@ def load_model(train_dir: Path, device: str = "cpu"):
 
 EPILOG = """\
 examples:
-  orca train --ground-truth captures/demo/ground_truth --decode results/demo/decode \
+  orca train --ground-truth captures/demo/ground_truth --decode results/demo/decode \\
              --capture captures/demo --preset fast
         train from a synthetic capture's ground-truth cameras and masks, with its capture.yaml
-  orca train --decode results/mug/decode --cameras results/mug/poses/cameras.json \\
-             --masks results/mug/masks/masks --out results/mug/train
+  orca train --decode results/mug/decode --cameras results/mug/masks/cameras.json \\
+             --masks results/mug/masks/masks --points results/mug/poses/sparse --out results/mug/train
+        what the Snakefile runs: the masks stage's cameras and masks, and the poses stage's sparse points
+        (sparse depth of the surroundings for the environment field)
   orca train ... --set iterations=500 --device cpu     a short CPU run
   orca train ... --restart                             ignore checkpoints and start over
 
