@@ -223,8 +223,8 @@ class LossConfig(StrictModel):
         "pull toward the recorded value keeps a light of unrecorded brightness from blooming past its edges"
     )
     sparse_depth: float = Field(
-        0.0, ge=0, description="rays through the poses stage's sparse points of the surroundings end there "
-        "(`orca train --points`; beyond the paper; docs/method.md)"
+        0.1, ge=0, description="rays through the poses stage's sparse points of the surroundings end there "
+        "(only with `orca train --points`, which the Snakefile passes; beyond the paper; docs/method.md)"
     )
     sparse_depth_band: float = Field(0.03, gt=0, lt=1, description="... within this share of the point's distance")
     smoothness: float = Field(0.1, ge=0, description="normals at the surface vs a small random step away")

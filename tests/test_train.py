@@ -217,7 +217,7 @@ def test_the_poses_stages_points_give_sparse_depth(sfm_sphere_capture, sfm_spher
 
     out = tmp_path / "train"
     result = run_train(sfm_sphere_decode, poses / "cameras.json", masks, out,
-                       _cfg("train.losses.sparse_depth=0.1", "train.depth_rays=32"), points_dir=poses / "sparse")
+                       _cfg("train.depth_rays=32"), points_dir=poses / "sparse")
     assert result is not None and 0 < result.final_losses["sparse_depth"] <= 1
     assert json.loads((out / "train_report.json").read_text())["sparse_depth_pixels"] == len(depth)
     # the environment's samples reach just past the farthest point, and the saved model renders with that bound
