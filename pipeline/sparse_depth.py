@@ -116,42 +116,31 @@ def depth_observations(
     Args:
         names: ``N`` image names; K ``(N, 3, 3)``, c2w ``(N, 4, 4)``, masks ``(N, H, W)`` bool, as trained on.
     """
+    from .object_frame import project
+
     index = {n: i for i, n in enumerate(names)}
-    n, h, w = masks.shape
+    _, h, w = masks.shape
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * object_margin_px + 1,) * 2)
-    near_object = np.stack([cv2.dilate(m.astype(np.uint8), kernel) > 0 for m in masks])
-    w2c = np.linalg.inv(c2w)
-    image, uv, distance = [], [], []
-    used = on_object = 0
-    for x, seen_by in zip(points.xyz, points.observers):
-        rows = []
-        touches_object = False
-        for name in seen_by:
-            i = index.get(name)
-            if i is None:
-                continue
-            p = w2c[i, :3, :3] @ x + w2c[i, :3, 3]
-            if p[2] <= 0:
-                continue
-            u, v = (K[i, :2, :2] @ (p[:2] / p[2])) + K[i, :2, 2]
-            col, row = int(np.floor(u)), int(np.floor(v))
-            if not (0 <= col < w and 0 <= row < h):
-                continue
-            if near_object[i, row, col]:
-                touches_object = True
-                break
-            rows.append((i, u, v, float(np.linalg.norm(p))))
-        if touches_object:
-            on_object += 1
-            continue
-        if rows:
-            used += 1
-            for i, u, v, d in rows:
-                image.append(i)
-                uv.append((u, v))
-                distance.append(d)
-    return DepthObservations(np.asarray(image, np.int64), np.asarray(uv, np.float64).reshape(-1, 2),
-                             np.asarray(distance, np.float64), used, on_object)
+    # every (point, photo that saw it) pair, in the order of the points
+    pairs = [(k, index[name]) for k, seen_by in enumerate(points.observers) for name in seen_by if name in index]
+    point, image = (np.asarray(a, np.int64) for a in zip(*pairs)) if pairs else (np.zeros(0, np.int64),) * 2
+    uv = np.zeros((len(pairs), 2))
+    seen = np.zeros(len(pairs), bool)  # in front of the camera and inside its photo
+    near = np.zeros(len(pairs), bool)
+    for i in np.unique(image):
+        sel = np.nonzero(image == i)[0]
+        pix, z = project(points.xyz[point[sel]], c2w[i][None], K[i][None])
+        col, row = np.floor(pix[0]).astype(np.int64).T
+        inside = (z[0] > 0) & (col >= 0) & (col < w) & (row >= 0) & (row < h)
+        near_object = cv2.dilate(masks[i].astype(np.uint8), kernel) > 0
+        uv[sel], seen[sel] = pix[0], inside
+        near[sel[inside]] = near_object[row[inside], col[inside]]
+    on_object = np.zeros(len(points.xyz), bool)
+    on_object[point[near]] = True
+    keep = seen & ~on_object[point]
+    distance = np.linalg.norm(points.xyz[point[keep]] - c2w[image[keep], :3, 3], axis=-1)
+    return DepthObservations(image[keep], uv[keep], distance, int(np.unique(point[keep]).size),
+                             int(on_object.sum()))
 
 
 # The farthest points are the first to be outliers (a bad match triangulated near infinity): the bound is taken
