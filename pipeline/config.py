@@ -156,7 +156,7 @@ class MasksConfig(StrictModel):
         "its radius) is taken as object: the cameras converge on it"
     )
     doubtful_vote: float = Field(
-        0.75, ge=0, le=1, description="a background vote counts this much where the view's pixel is dark (see "
+        0.5, ge=0, le=1, description="a background vote counts this much where the view's pixel is dark (see "
         "dark_level) and no evidence (outside the sphere, floor, depth sweep) confirms it: a dark object bottom on "
         "its dark contact shadow is lost by colour in the views from above; the views that see it against a lit "
         "background keep it (1: every vote counts fully)"
