@@ -442,7 +442,8 @@ def grabcut(image: np.ndarray, seeds: np.ndarray, iterations: int) -> np.ndarray
     bgr = np.ascontiguousarray(image[y0:y1, x0:x1, ::-1])
     # Repeatable masks: the colour models start from k-means on OpenCV's global random state, and the threaded
     # parts add their own noise (each a few pixels per view; with neither, two runs of the demo's 32 views on
-    # the same evidence gave identical masks, where they differed by ~0.01 IoU before).
+    # the same evidence gave identical masks, where they differed by ~0.01 IoU before). Not bit-exact: a
+    # process's first call can still differ by a pixel or two (measured on a small synthetic image).
     threads = cv2.getNumThreads()
     cv2.setRNGSeed(GRABCUT_SEED)
     cv2.setNumThreads(1)
