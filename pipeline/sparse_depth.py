@@ -21,6 +21,7 @@ import numpy as np
 
 from .cameras import CameraSet
 from .errors import InputError
+from .object_frame import project
 
 log = logging.getLogger("orca.sparse_depth")
 
@@ -116,8 +117,6 @@ def depth_observations(
     Args:
         names: ``N`` image names; K ``(N, 3, 3)``, c2w ``(N, 4, 4)``, masks ``(N, H, W)`` bool, as trained on.
     """
-    from .object_frame import project
-
     index = {n: i for i, n in enumerate(names)}
     _, h, w = masks.shape
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * object_margin_px + 1,) * 2)
