@@ -5,7 +5,11 @@ Every reader returns **linear** float32 RGB and a highlight-clipping mask; what 
 - RAW: ``(raw - black) / (white - black)`` per photosite, times the white-balance multipliers (G = 1),
   demosaiced by LibRaw, then (``color_space="srgb"``) LibRaw's camera -> linear sRGB matrix (from the file,
   e.g. a DNG's ColorMatrix, or LibRaw's table for the camera). So a neutral at the white level is 1.0.
-  No gamma, no auto-brightness, no ``adjust_maximum`` rescale, highlights clipped (not reconstructed).
+  No gamma, no auto-brightness, no ``adjust_maximum`` rescale, highlights clipped (not reconstructed):
+  a pixel whose every photosite nearby is saturated is set to the neutral level at which all channels saturate
+  (``max(wb) / wb[G]``), the least neutral radiance that saturates them all. White-balancing and
+  colour-converting the saturated values instead gives a tint, not a level: ``wb * 1`` through the matrix, pink
+  for a typical daylight balance, which a model trained on it would copy into every reflected light.
 - JPEG/PNG/TIFF (8 or 16 bit): the inverse sRGB transfer of the stored values (1.0 = the file's maximum).
   Float TIFFs are taken as already linear.
 
@@ -43,6 +47,9 @@ _FLIP_TO_EXIF = {0: 1, 1: 2, 3: 3, 2: 4, 4: 5, 6: 6, 7: 7, 5: 8}
 MATRIX_HEADROOM = 2.0
 # Raw-space dilation (pixels) of the clipped mask: demosaicing spreads a photosite about 2 pixels.
 CLIP_DILATE_RAW = 2
+# Half-size of the window whose photosites must all be saturated for a pixel to be set neutral: AHD
+# interpolates from a 5 x 5 neighbourhood, so such a pixel's value comes from saturated photosites alone.
+SATURATED_REACH = 2
 CLIP_DILATE_RASTER = 1
 
 
@@ -297,6 +304,39 @@ def _dilate(mask: np.ndarray, radius: int) -> np.ndarray:
     return cv2.dilate(mask.astype(np.uint8), k).astype(bool)
 
 
+def _saturated_everywhere(saturated: np.ndarray, colors: np.ndarray | None) -> np.ndarray:
+    """``(H, W)`` bool: pixels whose photosites of every colour within :data:`SATURATED_REACH` are saturated.
+
+    Args:
+        saturated: ``(H, W)`` per photosite of a mosaic, or ``(H, W, C)`` per channel of a linear raw.
+        colors: ``(H, W)`` LibRaw colour index (0..3, 3 = second green) of a mosaic's photosites; None for
+            a linear raw.
+    """
+    import cv2
+
+    size = 2 * SATURATED_REACH + 1
+    if colors is None:
+        return cv2.erode(saturated.all(axis=2).astype(np.uint8), np.ones((size, size), np.uint8)).astype(bool)
+    colors = np.where(colors == 3, 1, colors)
+    out = np.ones(saturated.shape, bool)
+    for c in np.unique(colors):
+        of_c = (colors == c).astype(np.float32)
+        # A colour's photosites in the window, and how many of them are saturated: all of them, or not.
+        count = cv2.boxFilter(of_c, -1, (size, size), normalize=False, borderType=cv2.BORDER_REPLICATE)
+        hits = cv2.boxFilter(of_c * saturated, -1, (size, size), normalize=False, borderType=cv2.BORDER_REPLICATE)
+        out &= hits >= count - 0.5
+    return out
+
+
+def _resized(mask: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """A raw-sized bool mask at LibRaw's output size (they differ for some sensors' margins)."""
+    if mask.shape == shape[:2]:
+        return mask
+    import cv2
+
+    return cv2.resize(mask.astype(np.uint8), (shape[1], shape[0]), interpolation=cv2.INTER_NEAREST).astype(bool)
+
+
 def decode_raw(
     info: PhotoInfo,
     *,
@@ -335,6 +375,7 @@ def decode_raw(
                 else:
                     per_pixel = float(black)
                 raw_clip = raw >= per_pixel + clip_fraction * (white - per_pixel)
+            saturated = _saturated_everywhere(raw_clip, None if raw.ndim == 3 else r.raw_colors_visible)
             if raw_clip.ndim == 3:
                 raw_clip = raw_clip.any(axis=2)
             raw_clip = _dilate(raw_clip, CLIP_DILATE_RAW)
@@ -371,14 +412,8 @@ def decode_raw(
     factor = user_sat / (white - black) * lo / 65535.0
     linear = out.astype(np.float32) * np.float32(factor)
     overflow = (out >= 65535).any(axis=2)
-    clipped = raw_clip
-    if clipped.shape != overflow.shape:
-        import cv2
-
-        clipped = cv2.resize(
-            clipped.astype(np.uint8), (overflow.shape[1], overflow.shape[0]), interpolation=cv2.INTER_NEAREST
-        ).astype(bool)
-    clipped = clipped | overflow
+    clipped = _resized(raw_clip, overflow.shape) | overflow
+    linear[_resized(saturated, overflow.shape)] = np.float32(hi)
     linear = np.ascontiguousarray(apply_orientation(linear, info.orientation))
     clipped = np.ascontiguousarray(apply_orientation(clipped, info.orientation))
     meta = {
