@@ -7,9 +7,10 @@ Every reader returns **linear** float32 RGB and a highlight-clipping mask; what 
   e.g. a DNG's ColorMatrix, or LibRaw's table for the camera). So a neutral at the white level is 1.0.
   No gamma, no auto-brightness, no ``adjust_maximum`` rescale, highlights clipped (not reconstructed):
   a pixel whose every photosite nearby is saturated is set to the neutral level at which all channels saturate
-  (``max(wb) / wb[G]``), the least neutral radiance that saturates them all. White-balancing and
-  colour-converting the saturated values instead gives a tint, not a level: ``wb * 1`` through the matrix, pink
-  for a typical daylight balance, which a model trained on it would copy into every reflected light.
+  (``max(wb)``, G = 1), the least neutral radiance that saturates them all, and no clipped pixel's channel
+  exceeds that level. White-balancing and colour-converting the saturated values instead gives a tint, not a
+  level: ``wb * 1`` through the matrix, pink for a typical daylight balance, which a model trained on it would
+  copy into every reflected light (the loss takes a clipped pixel's value as a lower bound).
 - JPEG/PNG/TIFF (8 or 16 bit): the inverse sRGB transfer of the stored values (1.0 = the file's maximum).
   Float TIFFs are taken as already linear.
 
@@ -47,9 +48,9 @@ _FLIP_TO_EXIF = {0: 1, 1: 2, 3: 3, 2: 4, 4: 5, 6: 6, 7: 7, 5: 8}
 MATRIX_HEADROOM = 2.0
 # Raw-space dilation (pixels) of the clipped mask: demosaicing spreads a photosite about 2 pixels.
 CLIP_DILATE_RAW = 2
-# Half-size of the window whose photosites must all be saturated for a pixel to be set neutral: AHD
-# interpolates from a 5 x 5 neighbourhood, so such a pixel's value comes from saturated photosites alone.
-SATURATED_REACH = 2
+# Half-size of the window whose photosites must all be saturated for a pixel to be set neutral: with 2 (AHD's
+# whole 5 x 5 window) small highlights kept LibRaw's saturated value, a 3 x 3 window catches every such pixel.
+SATURATED_REACH = 1
 CLIP_DILATE_RASTER = 1
 
 
@@ -413,6 +414,10 @@ def decode_raw(
     linear = out.astype(np.float32) * np.float32(factor)
     overflow = (out >= 65535).any(axis=2)
     clipped = _resized(raw_clip, overflow.shape) | overflow
+    # A clipped pixel's value is a lower bound. Where the colour matrix mixed saturated photosites with
+    # unsaturated ones it can exceed what any neutral light needs (R 4.3 on the demo), a bound the true light
+    # does not meet; capped at the all-channels level it stays a bound every light at least that bright meets.
+    np.minimum(linear, np.float32(hi), out=linear, where=clipped[..., None])
     linear[_resized(saturated, overflow.shape)] = np.float32(hi)
     linear = np.ascontiguousarray(apply_orientation(linear, info.orientation))
     clipped = np.ascontiguousarray(apply_orientation(clipped, info.orientation))

@@ -147,8 +147,9 @@ def test_clipped_mask(tmp_path):
 
 def test_saturated_highlight_is_neutral(tmp_path):
     """A white light far above the white level decodes to the neutral level at which every channel saturates
-    (max of the white-balance multipliers), not to the multipliers' tint through the colour matrix; a red light
-    that saturates only the red photosites keeps its colour."""
+    (max of the white-balance multipliers), not to the multipliers' tint through the colour matrix, and no
+    clipped pixel exceeds that level (its rim mixes saturated and unsaturated photosites); a red light that
+    saturates only the red photosites keeps its colour."""
     img = colourful()
     img[40:50, 60:70] = 5.0
     img[10:20, 10:20] = (10.0, 0.2, 0.2)
@@ -159,7 +160,8 @@ def test_saturated_highlight_is_neutral(tmp_path):
     linear = read_exr(tmp_path / "out" / "linear" / "a.exr")
     wb = decode_json(tmp_path / "out")["white_balance"]["multipliers"]
     assert max(wb) > 2.0  # the sensor's daylight balance is far from neutral: the test has teeth
-    np.testing.assert_allclose(linear[43:47, 63:67], max(wb), rtol=1e-5)
+    np.testing.assert_allclose(linear[41:49, 61:69], max(wb), rtol=1e-5)
+    assert linear[36:54, 56:74].max() <= max(wb) * (1 + 1e-6)
     red = linear[13:17, 13:17].reshape(-1, 3)
     assert np.all(red[:, 0] > 5 * red[:, 1]) and np.all(red[:, 0] > 5 * red[:, 2])
     clipped = read_image(tmp_path / "out" / "clipped" / "a.png") > 0
