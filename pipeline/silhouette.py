@@ -23,7 +23,12 @@ along it can see the gap. A background vote counts fully where evidence confirms
 floor, the depth sweep) or where the pixel is not dark; a dark pixel's vote that nothing confirms counts
 ``weak_weight`` (0.5): the dark bottom of a glossy object on its dark contact shadow is lost by colour in every
 view from above, and only the few views that see it against a lit background say otherwise. The hull,
-reprojected into every view, seeds the next round of GrabCut; a few rounds settle. The final mask of a view is
+reprojected into every view, seeds the next round of GrabCut; a few rounds settle. The hull knows nothing of
+occlusion: where a prop stands between a camera and the object it covers the prop, and its core would force the
+prop into that view's mask. So, from the second round, planes parallel to the support plane are swept between
+each camera and the hull (:func:`front_evidence`): textured pixels -- texture in two directions, an edge
+alone matches at any depth -- that such a plane explains in the neighbours, in blobs, are a prop's top in front
+of the object: the core is not forced there, and GrabCut decides by colour. The final mask of a view is
 the last hull's reprojection within ``final_reach_px`` (1) of that view's last GrabCut mask, less certain
 background: the hull keeps what one view's colours lose inside the object (a glossy rim mirroring the
 background, a dark bottom), the view's own colours trim the hull's overhang at the outline (the hull is
@@ -34,7 +39,10 @@ Failure cases (documented in the README): an object not standing on a visible te
 held, on a textureless table: cue 2 finds nothing and the contact shadow may stay in the masks); an
 object whose colours are those of its surroundings *and* which is seen against them everywhere; fewer than
 ~8 views around the object (the hull then barely constrains anything); a loose unit sphere from ``poses``
-that includes large props (they are carved only where views disagree); thin parts below the voxel size.
+that includes large props (they are carved only where views disagree; the sweep in front of the hull finds their
+tops, not their sides); holes through the object and the space under an overhang that fewer than
+``carve_share`` of the views see through (the hull fills them, and inside the hull colour alone does not
+separate a glossy object from what it mirrors); thin parts below the voxel size.
 
 Arrays: images ``(H, W, 3)`` uint8 sRGB at the working size; masks ``(H, W)`` bool; cameras OpenCV
 camera-to-world ``(4, 4)`` and pinhole ``K`` ``(3, 3)`` at the working size (pixel (0, 0) is the image
@@ -118,6 +126,12 @@ class SegmentOptions:
     weak_weight: float = 0.5
     dark_level: int = 48
     final_reach_px: int = 1
+    front_sweep: bool = True
+    front_step: float = 0.01
+    front_margin: float = 0.1
+    front_inset_px: int = 3
+    front_min_px: int = 40
+    front_corner: float = 1.0e-4
 
 
 @dataclass
@@ -387,34 +401,41 @@ def carve_votes(opts: SegmentOptions, views: int) -> float:
     return max(opts.carve_votes, round(opts.carve_share * views))
 
 
-def reproject(volume: np.ndarray, view: View, max_votes: float) -> np.ndarray:
-    """``(H, W)`` bool: pixels whose ray passes through the hull ``volume < max_votes`` (trilinear, so the
-    outline is finer than the voxels), marching in steps of half a voxel through the unit sphere."""
+def hull_depth(volume: np.ndarray, view: View, max_votes: float,
+               box: tuple[int, int, int, int] | None = None) -> np.ndarray:
+    """``(h, w)`` float32 over ``box`` (default: the sphere's image): the distance along each pixel's ray to where
+    it enters the hull ``volume < max_votes`` (trilinear, so the outline is finer than the voxels; ``inf``: it
+    misses), marching in steps of half a voxel through the unit sphere."""
     from scipy.ndimage import map_coordinates
 
-    out = np.zeros(view.shape, bool)
-    box = sphere_box(view)
-    if box is None:
-        return out
-    x0, y0, x1, y1 = box
+    x0, y0, x1, y1 = box if box is not None else (sphere_box(view) or (0, 0, 0, 0))
     res = volume.shape[0]
-    d = pixel_rays(view, box).reshape(-1, 3)
+    d = pixel_rays(view, (x0, y0, x1, y1)).reshape(-1, 3)
     o = view.c2w[:3, 3]
     b = d @ o
     disc = b * b - (o @ o - 1.0)
-    hit = disc > 0
+    hit = np.nonzero(disc > 0)[0]
     d, b, root = d[hit], b[hit], np.sqrt(disc[hit])
     t0, t1 = -b - root, -b + root
     steps = int(np.ceil(2.0 * res))  # the diameter (2) in half voxels (2 / res each)
-    least = np.full(len(d), OUTSIDE_VOTES, np.float32)
+    entry = np.full(len(d), np.inf, np.float32)
     for k in range(steps):
         t = t0 + (t1 - t0) * ((k + 0.5) / steps)
-        p = o + d * t[:, None]
-        idx = (p + 1.0) * (res / 2.0) - 0.5
-        np.minimum(least, map_coordinates(volume, idx.T, order=1, mode="constant", cval=OUTSIDE_VOTES), out=least)
-    flat = np.zeros((y1 - y0) * (x1 - x0), bool)
-    flat[np.nonzero(hit)[0]] = least < max_votes
-    out[y0:y1, x0:x1] = flat.reshape(y1 - y0, x1 - x0)
+        idx = (o + d * t[:, None] + 1.0) * (res / 2.0) - 0.5
+        inside = map_coordinates(volume, idx.T, order=1, mode="constant", cval=OUTSIDE_VOTES) < max_votes
+        np.minimum(entry, np.where(inside, t, np.inf), out=entry)
+    flat = np.full((y1 - y0) * (x1 - x0), np.inf, np.float32)
+    flat[hit] = entry
+    return flat.reshape(y1 - y0, x1 - x0)
+
+
+def reproject(volume: np.ndarray, view: View, max_votes: float) -> np.ndarray:
+    """``(H, W)`` bool: pixels whose ray passes through the hull ``volume < max_votes`` (:func:`hull_depth`)."""
+    out = np.zeros(view.shape, bool)
+    box = sphere_box(view)
+    if box is not None:
+        x0, y0, x1, y1 = box
+        out[y0:y1, x0:x1] = np.isfinite(hull_depth(volume, view, max_votes, box))
     return out
 
 
@@ -480,13 +501,15 @@ def first_seeds(sphere: np.ndarray, background: np.ndarray, seed_radius: float,
 
 
 def hull_seeds(hull: np.ndarray, keep_out: np.ndarray | None, background: np.ndarray, floor: np.ndarray | None,
-               erode_px: int, band_px: int, clipped: np.ndarray | None = None) -> np.ndarray:
+               erode_px: int, band_px: int, clipped: np.ndarray | None = None,
+               doubtful: np.ndarray | None = None) -> np.ndarray:
     """GrabCut labels from the hull's reprojection: certain object in the hull's eroded core (but not in
     ``keep_out``, near a prop seen in front) and on clipped highlights inside the hull (a glossy object's
     highlights are white like many backgrounds), probable object in the rest of the hull, probable background
     in a band around it, certain background beyond and wherever the floor or an occluder was seen -- except the
     floor inside the hull, which is only probable background: the bottom rim of a glossy object mirrors the floor
-    next to it at grazing angles and passes the floor test."""
+    next to it at grazing angles and passes the floor test. ``doubtful`` (a prop seen in front of the hull) is
+    probable background outside the core."""
     h8 = hull.astype(np.uint8)
     seeds = np.full(hull.shape, cv2.GC_BGD, np.uint8)
     seeds[cv2.dilate(h8, _disc(band_px)) > 0] = cv2.GC_PR_BGD
@@ -500,6 +523,8 @@ def hull_seeds(hull: np.ndarray, keep_out: np.ndarray | None, background: np.nda
     if floor is not None:
         seeds[floor & hull & ~core] = cv2.GC_PR_BGD
         seeds[floor & ~hull] = cv2.GC_BGD
+    if doubtful is not None:
+        seeds[doubtful & ~core] = cv2.GC_PR_BGD
     seeds[background] = cv2.GC_BGD
     return seeds
 
@@ -512,19 +537,77 @@ def local_contrast(image: np.ndarray, window: int = 5) -> np.ndarray:
     return np.sqrt(np.maximum(cv2.blur(g * g, (window, window)) - mu * mu, 0.0)).mean(-1)
 
 
+def corner_strength(image: np.ndarray, window: int = 5) -> np.ndarray:
+    """``(H, W)`` float32: the smaller eigenvalue of the structure tensor of the grey image (0..1, Sobel gradients
+    per pixel) over a ``window`` box. Large only where the texture varies in two directions: an edge alone (the
+    outline of a light's reflection) matches all along itself, so a plane sweep places it at any depth."""
+    g = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY).astype(np.float32) / 255.0
+    gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3) / 8.0
+    gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3) / 8.0
+    a, b, c = (cv2.blur(x, (window, window)) for x in (gx * gx, gx * gy, gy * gy))
+    return (a + c) / 2.0 - np.sqrt(((a - c) / 2.0) ** 2 + b * b)
+
+
 def occluder_evidence(view: View, others: Sequence[View], opts: SegmentOptions) -> np.ndarray:
     """``(H, W)`` bool: textured, unclipped pixels of the sphere's image that a surface outside the sphere
     explains (:func:`outside_cost`): a prop in front of the object, the room behind it."""
-    out = np.zeros(view.shape, bool)
     found = outside_cost(view, others, opts.occluder_rank, far=opts.sweep_far)
     if found is None:
-        return out
-    cost, (x0, y0, x1, y1) = found
+        return np.zeros(view.shape, bool)
+    return _matched(view, *found, opts)
+
+
+def _matched(view: View, cost: np.ndarray, box: tuple[int, int, int, int], opts: SegmentOptions) -> np.ndarray:
+    """``(H, W)`` bool: the pixels of ``box`` whose sweep ``cost`` is under the threshold, textured and away from
+    clipped highlights (a highlight's outline can match at a wrong depth; it is never evidence)."""
+    x0, y0, x1, y1 = box
+    out = np.zeros(view.shape, bool)
     textured = local_contrast(view.image[y0:y1, x0:x1]) > opts.texture_threshold
     out[y0:y1, x0:x1] = (cost < opts.occluder_threshold) & textured
-    if view.clipped is not None:  # a highlight's outline can match at a wrong depth; it is never evidence
+    if view.clipped is not None:
         out &= ~(cv2.dilate(view.clipped.astype(np.uint8), _disc(2)) > 0)
     return out
+
+
+def front_cost(view: View, others: Sequence[View], plane: Plane, entry: np.ndarray, box: tuple[int, int, int, int],
+               rank: int, step: float, margin: float) -> np.ndarray:
+    """``(h, w)`` float32 over ``box``: how well something *inside* the unit sphere but in front of the object's
+    hull explains each pixel -- the best :func:`plane_cost` over planes parallel to the support plane (a prop's
+    top), from ``step`` above it to the top of the sphere, ``step`` apart, counting only where the pixel's ray
+    meets the plane more than ``margin`` before it enters the hull (``entry``, :func:`hull_depth`): the object is
+    never in front of its hull, a prop the loose sphere holds can be."""
+    o = view.c2w[:3, 3]
+    facing = pixel_rays(view, box) @ plane.normal
+    best = np.full(entry.shape, np.inf, np.float32)
+    for height in np.arange(step, 1.0 - plane.offset, step):
+        offset = plane.offset + height
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (offset - plane.normal @ o) / facing
+        valid = (t > 0) & (t < entry - margin)
+        if valid.any():
+            cost = plane_cost(view, others, plane.normal, offset, rank, box=box)
+            np.minimum(best, np.where(valid, cost, np.inf), out=best)
+    return best
+
+
+def front_evidence(view: View, others: Sequence[View], plane: Plane, volume: np.ndarray, max_votes: float,
+                   opts: SegmentOptions) -> np.ndarray:
+    """``(H, W)`` bool: textured, unclipped pixels of the sphere's image that a surface between the camera and the
+    hull ``volume < max_votes`` explains (:func:`front_cost`): a prop in front of the object inside the sphere,
+    which the depth sweep outside the sphere cannot see and the hull, knowing nothing of occlusion, covers."""
+    box = sphere_box(view)
+    if box is None or not others:
+        return np.zeros(view.shape, bool)
+    entry = hull_depth(volume, view, max_votes, box)
+    # Only well inside the hull's image: at its outline a window mixes the object with what is behind it.
+    inner = cv2.erode(np.isfinite(entry).astype(np.uint8), _disc(opts.front_inset_px)) > 0
+    entry = np.where(inner, entry, -np.inf)
+    cost = front_cost(view, others, plane, entry, box, opts.occluder_rank, opts.front_step, opts.front_margin)
+    found = (_matched(view, cost, box, opts) & (corner_strength(view.image) > opts.front_corner)).astype(np.uint8)
+    # A prop's top matches in blobs; the object's own chance matches (corners of a reflection) in specks.
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(found, connectivity=8)
+    big = np.nonzero(stats[:, cv2.CC_STAT_AREA] >= opts.front_min_px)[0]
+    return np.isin(labels, big[big > 0])
 
 
 def _floor_from_cost(cost: np.ndarray, outside: np.ndarray, opts: SegmentOptions) -> np.ndarray:
@@ -669,6 +752,7 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
     floors = list(evidence.floors)
     masks = list(evidence.masks)
     nbrs = neighbours(views, opts.neighbours, opts.neighbour_max_deg)
+    near = neighbours(views, opts.occluder_neighbours, opts.neighbour_max_deg)
     points, index = hull_grid(opts.hull_resolution, plane)
     rounds: list[dict[str, float]] = []
     hulls: list[np.ndarray] = []
@@ -681,6 +765,13 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
         votes = carve_votes(opts, n) + opts.votes_relax * (opts.rounds - 1 - r)
         hulls = [reproject(volume, v, votes - 0.5) for v in views]
         step("carve")
+        front: list[np.ndarray | None] = [None] * n
+        if plane is not None and opts.front_sweep and r > 0:
+            # Props in front of the object inside the sphere, found anew against each round's hull (not the first
+            # round's: the sphere prior's masks make a hull too loose to have much in front of it).
+            front = [np.zeros(v.shape, bool) if i in fixed else
+                     front_evidence(v, [views[j] for j in near[i]], plane, volume, votes - 0.5, opts)
+                     for i, v in enumerate(views)]
         if plane is not None and opts.floor_visibility:
             # Again, now that the hull tells which neighbours see each floor point: the shadowed floor under an
             # overhang is hidden from most neighbours, and they must not vote against it. Only the hull's part
@@ -697,11 +788,13 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
                 new.append(fixed[i])
             else:
                 # The hull knows nothing of occlusion: its core is not forced onto a prop seen in front.
+                seen = [e for e in (occluded[i], front[i]) if e is not None and e.any()]
                 keep_out = None
-                if occluded[i] is not None and occluded[i].any():
-                    keep_out = cv2.dilate(occluded[i].astype(np.uint8), _disc(opts.occluder_reach_px)) > 0
+                if seen:
+                    props = np.logical_or.reduce(seen).astype(np.uint8)
+                    keep_out = cv2.dilate(props, _disc(opts.occluder_reach_px)) > 0
                 seeds = hull_seeds(hulls[i], keep_out, backgrounds[i], floors[i], opts.core_erode_px, opts.band_px,
-                                   v.clipped)
+                                   v.clipped, front[i])
                 new.append(grabcut(v.image, seeds, opts.grabcut_iterations))
             step("segment")
         agreement = [iou(a, b) for a, b in zip(new, hulls)]

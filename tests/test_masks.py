@@ -18,10 +18,17 @@ from pipeline.config import MasksConfig, PosesConfig
 from pipeline.errors import InputError
 from pipeline.imageio import read_image, write_png
 from pipeline.silhouette import (
+    OUTSIDE_VOTES,
+    Plane,
+    SegmentOptions,
     View,
     carve,
+    corner_strength,
+    front_evidence,
     hull_grid,
     iou,
+    neighbours,
+    pixel_rays,
     plane_homography,
     reproject,
     sphere_distance,
@@ -147,6 +154,78 @@ def test_doubtful_background_votes_count_less():
     for v, m in zip(views[::6], truth[::6]):
         assert iou(reproject(full, v, 4.5), m) < 0.85
         assert iou(reproject(weighted, v, 4.5), m) > 0.9
+
+
+def test_corner_strength_is_zero_along_an_edge_and_large_at_corners():
+    """An edge matches all along itself, so a sweep could put it at any depth: only texture that varies in two
+    directions counts as evidence in front of the hull."""
+    edge = np.zeros((32, 32, 3), np.uint8)
+    edge[:, 16:] = 255
+    checker = ((np.indices((32, 32)) // 4).sum(0) % 2 * 255).astype(np.uint8)[..., None].repeat(3, -1)
+    threshold = SegmentOptions().front_corner
+    assert corner_strength(edge)[4:-4, 4:-4].max() < 1e-3 * threshold
+    assert np.percentile(corner_strength(checker)[4:-4, 4:-4], 50) > threshold
+
+
+def prop_in_front_views(n: int = 12) -> tuple[list[View], np.ndarray, list[np.ndarray]]:
+    """A mirror ball (radius 0.4, at the origin; a diffuse label on its top) on the floor z = -0.9, and a prop's
+    textured top -- the square
+    |x - 0.45| < 0.2, |y| < 0.3 at z = 0.5, inside the unit sphere -- between it and the cameras on the +x side;
+    a ring of cameras 50 deg up, at 240x180. Returns the views, the ball's exact hull votes (64^3) and, per view,
+    where the prop's top is seen."""
+    rng = np.random.default_rng(3)
+    cells = rng.integers(0, 256, (16, 16, 3)).astype(np.uint8)  # a texture with corners everywhere
+
+    def texture(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        u, v = (np.floor(np.nan_to_num(a, posinf=0.0, neginf=0.0)).astype(int) % 16 for a in (u, v))
+        return cells[u, v]
+
+    views, tops = [], []
+    for view in ring_views(n, size=(240, 180), elevation_deg=50.0):
+        view.K = np.array([[200.0, 0, 120], [0, 200.0, 90], [0, 0, 1]])
+        o, d = view.c2w[:3, 3], pixel_rays(view)
+        image = np.full(d.shape, 128, np.uint8)  # flat grey: no texture, nothing to match
+        b = d @ o
+        disc = b * b - (o @ o - 0.16)
+        t_ball = np.where(disc > 0, -b - np.sqrt(np.maximum(disc, 0)), np.inf)
+        hit = o + d * t_ball[..., None]
+        mirrored = d - 2 * (d * hit).sum(-1, keepdims=True) * hit / 0.16  # reflect about the normal hit / 0.4
+        ball = np.isfinite(t_ball)
+        image[ball] = texture(4 * mirrored[..., 0] + 8, 4 * mirrored[..., 1] + 8)[ball]
+        label = ball & (hit[..., 2] > 0.25)  # a diffuse label on its top: photo-consistent on its own surface
+        image[label] = texture(8 * hit[..., 0] + 3, 8 * hit[..., 1] + 3)[label]
+        t_top = (0.5 - o[2]) / d[..., 2]
+        p = o + d * t_top[..., None]
+        top = (np.abs(p[..., 0] - 0.45) < 0.2) & (np.abs(p[..., 1]) < 0.3) & (t_top < t_ball)
+        image[top] = texture(8 * p[..., 0], 8 * p[..., 1])[top]
+        view.image = cv2.GaussianBlur(image, (0, 0), 0.7)  # a lens's blur, as in the photos
+        views.append(view)
+        tops.append(top)
+    ax = (np.arange(64) + 0.5) / 32 - 1
+    x, y, z = np.meshgrid(ax, ax, ax, indexing="ij")
+    votes = np.where(x * x + y * y + z * z < 0.16, 0.0, OUTSIDE_VOTES).astype(np.float32)
+    return views, votes, tops
+
+
+def test_a_prop_in_front_of_the_hull_is_found_and_the_mirror_ball_is_not():
+    """The sweep between camera and hull finds the prop's top where it covers the ball's image (the hull, blind to
+    occlusion, covers it there), and only there: never the ball's label, which matches planes through the ball but
+    not in front of it, nor its reflections; from the other side, the prop beside the ball, it finds nothing."""
+    views, votes, tops = prop_in_front_views()
+    near = neighbours(views, 3, 60.0)
+    plane = Plane(np.array([0.0, 0.0, 1.0]), -0.9, 1.0)
+    opts = SegmentOptions()
+    for i in (0, 6):  # the camera on the +x side, then the one opposite
+        found = front_evidence(views[i], [views[j] for j in near[i]], plane, votes, 0.5, opts)
+        hull = reproject(votes, views[i], 0.5)
+        covered = tops[i] & hull
+        if i == 0:
+            assert covered.sum() > 400
+            assert (found & ~cv2.dilate(tops[i].astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)).sum() == 0
+            assert (found & covered).sum() > 0.4 * covered.sum()
+        else:
+            assert covered.sum() == 0
+            assert found.sum() == 0
 
 
 # ------------------------------------------------------------------------------------------ the stage
