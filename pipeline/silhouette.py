@@ -605,7 +605,7 @@ def front_evidence(view: View, others: Sequence[View], plane: Plane, volume: np.
     cost = front_cost(view, others, plane, entry, box, opts.occluder_rank, opts.front_step, opts.front_margin)
     found = (_matched(view, cost, box, opts) & (corner_strength(view.image) > opts.front_corner)).astype(np.uint8)
     # A prop's top matches in blobs; the object's own chance matches (corners of a reflection) in specks.
-    count, labels, stats, _ = cv2.connectedComponentsWithStats(found, connectivity=8)
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(found, connectivity=8)
     big = np.nonzero(stats[:, cv2.CC_STAT_AREA] >= opts.front_min_px)[0]
     return np.isin(labels, big[big > 0])
 
@@ -772,6 +772,10 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
             front = [np.zeros(v.shape, bool) if i in fixed else
                      front_evidence(v, [views[j] for j in near[i]], plane, volume, votes - 0.5, opts)
                      for i, v in enumerate(views)]
+            props = [views[i].name for i, f in enumerate(front) if f is not None and f.any()]
+            if props:
+                log.info("round %d: something in front of the hull in %d view(s): %s", r + 1, len(props),
+                         ", ".join(props))
         if plane is not None and opts.floor_visibility:
             # Again, now that the hull tells which neighbours see each floor point: the shadowed floor under an
             # overhang is hidden from most neighbours, and they must not vote against it. Only the hull's part
