@@ -196,6 +196,11 @@ class MasksConfig(StrictModel):
         "visual hull: a prop in front of the object inside the unit sphere (which the hull covers) is not forced into "
         "the mask (~1 s per view and round at 320x240 on a CPU core)"
     )
+    through_floor: bool = Field(
+        True, description="from the second round, pixels inside the visual hull's image that the support plane "
+        "explains in any other view are certain background: the floor seen through a hole or under an overhang, "
+        "which the hull fills when few views see through it"
+    )
     sphere_margin: float = Field(1.05, ge=1, description="the object's refined bounding sphere is enlarged by this")
     renormalize: bool = Field(
         True, description="write cameras.json in the frame where the refined sphere is the unit sphere (tight "

@@ -53,7 +53,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -132,6 +132,9 @@ class SegmentOptions:
     front_inset_px: int = 3
     front_min_px: int = 40
     front_corner: float = 1.0e-4
+    through_floor: bool = True
+    through_threshold: float = 0.04
+    through_min_px: int = 16
 
 
 @dataclass
@@ -603,11 +606,31 @@ def front_evidence(view: View, others: Sequence[View], plane: Plane, volume: np.
     inner = cv2.erode(np.isfinite(entry).astype(np.uint8), _disc(opts.front_inset_px)) > 0
     entry = np.where(inner, entry, -np.inf)
     cost = front_cost(view, others, plane, entry, box, opts.occluder_rank, opts.front_step, opts.front_margin)
-    found = (_matched(view, cost, box, opts) & (corner_strength(view.image) > opts.front_corner)).astype(np.uint8)
+    found = _matched(view, cost, box, opts) & (corner_strength(view.image) > opts.front_corner)
     # A prop's top matches in blobs; the object's own chance matches (corners of a reflection) in specks.
-    _, labels, stats, _ = cv2.connectedComponentsWithStats(found, connectivity=8)
-    big = np.nonzero(stats[:, cv2.CC_STAT_AREA] >= opts.front_min_px)[0]
+    return _blobs(found, opts.front_min_px)
+
+
+def _blobs(found: np.ndarray, min_px: int) -> np.ndarray:
+    """``found`` without its connected pieces smaller than ``min_px``."""
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(found.astype(np.uint8), connectivity=8)
+    big = np.nonzero(stats[:, cv2.CC_STAT_AREA] >= min_px)[0]
     return np.isin(labels, big[big > 0])
+
+
+def floor_through_hull(view: View, others: Sequence[View], plane: Plane, hull: np.ndarray,
+                       opts: SegmentOptions) -> np.ndarray:
+    """``(H, W)`` bool: pixels well inside the hull's reprojection ``hull`` that the support plane explains in at
+    least one of ``others`` (every other view), textured in two directions (:func:`corner_strength`), in blobs:
+    the floor seen through a hole in the object or under an overhang, which the hull fills because fewer than
+    ``carve_share`` of the views see through it. One view suffices: the few that see through are on every side.
+    The object's own matches -- a glossy bottom mirrors the floor next to it -- are flat or edges, and specks."""
+    cost = plane_cost(view, others, plane.normal, plane.offset, 1)
+    inner = cv2.erode(hull.astype(np.uint8), _disc(opts.front_inset_px)) > 0
+    whole = (0, 0, view.shape[1], view.shape[0])
+    found = _matched(view, cost, whole, replace(opts, occluder_threshold=opts.through_threshold))
+    found &= inner & (corner_strength(view.image) > opts.front_corner)
+    return _blobs(found, opts.through_min_px)
 
 
 def _floor_from_cost(cost: np.ndarray, outside: np.ndarray, opts: SegmentOptions) -> np.ndarray:
@@ -743,6 +766,12 @@ def segment(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.nda
     return refine(views, opts, evidence, fixed, step)
 
 
+def _log_found(r: int, what: str, views: Sequence[View], found: Sequence[np.ndarray | None]) -> None:
+    names = [v.name for v, f in zip(views, found) if f is not None and f.any()]
+    if names:
+        log.info("round %d: %s in %d view(s): %s", r + 1, what, len(names), ", ".join(names))
+
+
 def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixed: dict[int, np.ndarray] | None = None,
            step: Callable[[str], None] = lambda label: None) -> Segmentation:
     """Rounds of carving and GrabCut from the ``evidence``, then the final masks (see the module doc)."""
@@ -765,17 +794,24 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
         votes = carve_votes(opts, n) + opts.votes_relax * (opts.rounds - 1 - r)
         hulls = [reproject(volume, v, votes - 0.5) for v in views]
         step("carve")
-        front: list[np.ndarray | None] = [None] * n
+        # Where this round does not force the hull's core: something seen in front of the hull, or through it.
+        released: list[np.ndarray | None] = [None] * n
         if plane is not None and opts.front_sweep and r > 0:
             # Props in front of the object inside the sphere, found anew against each round's hull (not the first
             # round's: the sphere prior's masks make a hull too loose to have much in front of it).
-            front = [np.zeros(v.shape, bool) if i in fixed else
-                     front_evidence(v, [views[j] for j in near[i]], plane, volume, votes - 0.5, opts)
-                     for i, v in enumerate(views)]
-            props = [views[i].name for i, f in enumerate(front) if f is not None and f.any()]
-            if props:
-                log.info("round %d: something in front of the hull in %d view(s): %s", r + 1, len(props),
-                         ", ".join(props))
+            released = [np.zeros(v.shape, bool) if i in fixed else
+                        front_evidence(v, [views[j] for j in near[i]], plane, volume, votes - 0.5, opts)
+                        for i, v in enumerate(views)]
+            _log_found(r, "something in front of the hull", views, released)
+        if plane is not None and opts.through_floor and r > 0:
+            # The floor seen through the hull is certain background: it confirms the view's votes in the next
+            # carve, and no mask keeps it.
+            through = [np.zeros(v.shape, bool) if i in fixed else
+                       floor_through_hull(v, [w for j, w in enumerate(views) if j != i], plane, hulls[i], opts)
+                       for i, v in enumerate(views)]
+            backgrounds = [b | t for b, t in zip(evidence.backgrounds, through)]
+            released = [t if f is None else f | t for f, t in zip(released, through)]
+            _log_found(r, "the floor seen through the hull", views, through)
         if plane is not None and opts.floor_visibility:
             # Again, now that the hull tells which neighbours see each floor point: the shadowed floor under an
             # overhang is hidden from most neighbours, and they must not vote against it. Only the hull's part
@@ -792,13 +828,13 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
                 new.append(fixed[i])
             else:
                 # The hull knows nothing of occlusion: its core is not forced onto a prop seen in front.
-                seen = [e for e in (occluded[i], front[i]) if e is not None and e.any()]
+                seen = [e for e in (occluded[i], released[i]) if e is not None and e.any()]
                 keep_out = None
                 if seen:
                     props = np.logical_or.reduce(seen).astype(np.uint8)
                     keep_out = cv2.dilate(props, _disc(opts.occluder_reach_px)) > 0
                 seeds = hull_seeds(hulls[i], keep_out, backgrounds[i], floors[i], opts.core_erode_px, opts.band_px,
-                                   v.clipped, front[i])
+                                   v.clipped, released[i])
                 new.append(grabcut(v.image, seeds, opts.grabcut_iterations))
             step("segment")
         agreement = [iou(a, b) for a, b in zip(new, hulls)]

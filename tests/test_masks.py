@@ -24,6 +24,7 @@ from pipeline.silhouette import (
     View,
     carve,
     corner_strength,
+    floor_through_hull,
     front_evidence,
     hull_grid,
     iou,
@@ -226,6 +227,42 @@ def test_a_prop_in_front_of_the_hull_is_found_and_the_mirror_ball_is_not():
         else:
             assert covered.sum() == 0
             assert found.sum() == 0
+
+
+def test_the_floor_seen_through_a_too_large_hull_is_found_and_the_mirror_is_not():
+    """A mirror ball (radius 0.4) floating over a textured floor (z = -0.9), every view's hull twice its size
+    (as a hull is where few views see past the object): the floor inside the hull's image is found in every view,
+    the ball -- which mirrors that very floor -- nowhere."""
+    cells = np.random.default_rng(5).integers(0, 256, (16, 16, 3)).astype(np.uint8)
+
+    def floor_colour(p: np.ndarray) -> np.ndarray:
+        u, v = (np.floor(8 * np.nan_to_num(p[..., k], posinf=0.0, neginf=0.0)).astype(int) % 16 for k in (0, 1))
+        return cells[u, v]
+
+    views, balls, floors = [], [], []
+    for view in ring_views(12, size=(240, 180), elevation_deg=50.0):
+        view.K = np.array([[200.0, 0, 120], [0, 200.0, 90], [0, 0, 1]])
+        o, d = view.c2w[:3, 3], pixel_rays(view)
+        b = d @ o
+        disc = b * b - (o @ o - 0.16)
+        ball = disc > 0
+        hit = o + d * (-b - np.sqrt(np.maximum(disc, 0)))[..., None]
+        mirrored = d - 2 * (d * hit).sum(-1, keepdims=True) * hit / 0.16
+        t_floor = (-0.9 - o[2]) / d[..., 2]
+        image = floor_colour(o + d * t_floor[..., None])
+        t_mirror = (-0.9 - hit[..., 2]) / mirrored[..., 2]
+        seen = floor_colour(hit + mirrored * t_mirror[..., None])
+        image[ball] = np.where((t_mirror[ball] > 0)[:, None], seen[ball], 200)  # the floor, or a bright sky
+        view.image = cv2.GaussianBlur(image, (0, 0), 0.7)
+        views.append(view)
+        balls.append(ball)
+        floors.append(~ball)
+    plane = Plane(np.array([0.0, 0.0, 1.0]), -0.9, 1.0)
+    for i, view in enumerate(views):
+        hull = sphere_distance(view, radius=0.8) < 1.0
+        found = floor_through_hull(view, views[:i] + views[i + 1:], plane, hull, SegmentOptions())
+        assert (found & balls[i]).sum() == 0
+        assert (found & floors[i] & hull).sum() > 0.5 * (floors[i] & hull).sum()
 
 
 # ------------------------------------------------------------------------------------------ the stage

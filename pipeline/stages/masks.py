@@ -374,6 +374,7 @@ def _segment_options(config: MasksConfig) -> Any:
         occluder_rank=config.sweep_rank, occluder_threshold=config.sweep_threshold,
         texture_threshold=config.texture_threshold, weak_weight=config.doubtful_vote, dark_level=config.dark_level,
         final_reach_px=config.final_reach_px, front_sweep=config.front_sweep,
+        through_floor=config.through_floor,
     )
 
 
