@@ -28,7 +28,11 @@ occlusion: where a prop stands between a camera and the object it covers the pro
 prop into that view's mask. So, from the second round, planes parallel to the support plane are swept between
 each camera and the hull (:func:`front_evidence`): textured pixels -- texture in two directions, an edge
 alone matches at any depth -- that such a plane explains in the neighbours, in blobs, are a prop's top in front
-of the object: the core is not forced there, and GrabCut decides by colour. The final mask of a view is
+of the object: the core is not forced there, and GrabCut decides by colour. And where fewer than
+``carve_share`` of the views see through the object -- a hole, the space under a lifted side -- the hull fills
+it; those views' pixels inside the hull's image that the support plane explains in *any* other view (one
+suffices: the views that see through are few and on every side), textured in two directions, in blobs, are the
+floor seen through the hull (:func:`floor_through_hull`): certain background. The final mask of a view is
 the last hull's reprojection within ``final_reach_px`` (1) of that view's last GrabCut mask, less certain
 background: the hull keeps what one view's colours lose inside the object (a glossy rim mirroring the
 background, a dark bottom), the view's own colours trim the hull's overhang at the outline (the hull is
@@ -41,8 +45,9 @@ object whose colours are those of its surroundings *and* which is seen against t
 ~8 views around the object (the hull then barely constrains anything); a loose unit sphere from ``poses``
 that includes large props (they are carved only where views disagree; the sweep in front of the hull finds their
 tops, not their sides); holes through the object and the space under an overhang that fewer than
-``carve_share`` of the views see through (the hull fills them, and inside the hull colour alone does not
-separate a glossy object from what it mirrors); thin parts below the voxel size.
+``carve_share`` of the views see through, where what shows through is not a textured floor (the hull fills
+them, and inside the hull colour alone does not separate a glossy object from what it mirrors); thin parts
+below the voxel size.
 
 Arrays: images ``(H, W, 3)`` uint8 sRGB at the working size; masks ``(H, W)`` bool; cameras OpenCV
 camera-to-world ``(4, 4)`` and pinhole ``K`` ``(3, 3)`` at the working size (pixel (0, 0) is the image
