@@ -817,6 +817,8 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
             backgrounds = [b | t for b, t in zip(evidence.backgrounds, through)]
             released = [t if f is None else f | t for f, t in zip(released, through)]
             _log_found(r, "the floor seen through the hull", views, through)
+        if r > 0:
+            step("evidence against the hull")
         if plane is not None and opts.floor_visibility:
             # Again, now that the hull tells which neighbours see each floor point: the shadowed floor under an
             # overhang is hidden from most neighbours, and they must not vote against it. Only the hull's part

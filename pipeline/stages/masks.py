@@ -286,7 +286,7 @@ def run_masks(
             final, plane, rounds = [fixed[i] for i in range(len(views))], None, []
         else:
             auto = len(views) - len(fixed)
-            task = bar.add_task("segment", total=(2 * auto + 2) + opts.rounds * (auto + 1))
+            task = bar.add_task("segment", total=(2 * auto + 2) + opts.rounds * (auto + 2) - 1)
             seg = segment(views, opts, fixed=fixed, on_step=lambda label: bar.advance(task))
             final, plane, rounds = seg.masks, seg.plane, seg.rounds
 
