@@ -58,7 +58,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -409,16 +409,19 @@ def carve_votes(opts: SegmentOptions, views: int) -> float:
     return max(opts.carve_votes, round(opts.carve_share * views))
 
 
-def hull_depth(volume: np.ndarray, view: View, max_votes: float,
-               box: tuple[int, int, int, int] | None = None) -> np.ndarray:
-    """``(h, w)`` float32 over ``box`` (default: the sphere's image): the distance along each pixel's ray to where
-    it enters the hull ``volume < max_votes`` (trilinear, so the outline is finer than the voxels; ``inf``: it
-    misses), marching in steps of half a voxel through the unit sphere."""
+def hull_depth(volume: np.ndarray, view: View, max_votes: float) -> np.ndarray:
+    """``(H, W)`` float32: the distance along each pixel's ray to where it enters the hull ``volume < max_votes``
+    (trilinear, so the outline is finer than the voxels; ``inf``: it misses), marching in steps of half a voxel
+    through the unit sphere."""
     from scipy.ndimage import map_coordinates
 
-    x0, y0, x1, y1 = box if box is not None else (sphere_box(view) or (0, 0, 0, 0))
+    out = np.full(view.shape, np.inf, np.float32)
+    box = sphere_box(view)
+    if box is None:
+        return out
+    x0, y0, x1, y1 = box
     res = volume.shape[0]
-    d = pixel_rays(view, (x0, y0, x1, y1)).reshape(-1, 3)
+    d = pixel_rays(view, box).reshape(-1, 3)
     o = view.c2w[:3, 3]
     b = d @ o
     disc = b * b - (o @ o - 1.0)
@@ -434,17 +437,13 @@ def hull_depth(volume: np.ndarray, view: View, max_votes: float,
         np.minimum(entry, np.where(inside, t, np.inf), out=entry)
     flat = np.full((y1 - y0) * (x1 - x0), np.inf, np.float32)
     flat[hit] = entry
-    return flat.reshape(y1 - y0, x1 - x0)
+    out[y0:y1, x0:x1] = flat.reshape(y1 - y0, x1 - x0)
+    return out
 
 
 def reproject(volume: np.ndarray, view: View, max_votes: float) -> np.ndarray:
     """``(H, W)`` bool: pixels whose ray passes through the hull ``volume < max_votes`` (:func:`hull_depth`)."""
-    out = np.zeros(view.shape, bool)
-    box = sphere_box(view)
-    if box is not None:
-        x0, y0, x1, y1 = box
-        out[y0:y1, x0:x1] = np.isfinite(hull_depth(volume, view, max_votes, box))
-    return out
+    return np.isfinite(hull_depth(volume, view, max_votes))
 
 
 # ------------------------------------------------------------------------------------- per-view colour
@@ -562,16 +561,18 @@ def occluder_evidence(view: View, others: Sequence[View], opts: SegmentOptions) 
     found = outside_cost(view, others, opts.occluder_rank, far=opts.sweep_far)
     if found is None:
         return np.zeros(view.shape, bool)
-    return _matched(view, *found, opts)
+    cost, box = found
+    return _matched(view, cost, box, opts.occluder_threshold, opts)
 
 
-def _matched(view: View, cost: np.ndarray, box: tuple[int, int, int, int], opts: SegmentOptions) -> np.ndarray:
-    """``(H, W)`` bool: the pixels of ``box`` whose sweep ``cost`` is under the threshold, textured and away from
+def _matched(view: View, cost: np.ndarray, box: tuple[int, int, int, int], threshold: float,
+             opts: SegmentOptions) -> np.ndarray:
+    """``(H, W)`` bool: the pixels of ``box`` whose sweep ``cost`` is under ``threshold``, textured and away from
     clipped highlights (a highlight's outline can match at a wrong depth; it is never evidence)."""
     x0, y0, x1, y1 = box
     out = np.zeros(view.shape, bool)
     textured = local_contrast(view.image[y0:y1, x0:x1]) > opts.texture_threshold
-    out[y0:y1, x0:x1] = (cost < opts.occluder_threshold) & textured
+    out[y0:y1, x0:x1] = (cost < threshold) & textured
     if view.clipped is not None:
         out &= ~(cv2.dilate(view.clipped.astype(np.uint8), _disc(2)) > 0)
     return out
@@ -598,29 +599,34 @@ def front_cost(view: View, others: Sequence[View], plane: Plane, entry: np.ndarr
     return best
 
 
-def front_evidence(view: View, others: Sequence[View], plane: Plane, volume: np.ndarray, max_votes: float,
+def _inner(hull: np.ndarray, opts: SegmentOptions) -> np.ndarray:
+    """Well inside the hull's image: at its outline a window mixes the object with what is behind it."""
+    return cv2.erode(hull.astype(np.uint8), _disc(opts.front_inset_px)) > 0
+
+
+def _blobs_of_corners(view: View, found: np.ndarray, min_px: int, opts: SegmentOptions) -> np.ndarray:
+    """``found`` where the texture varies in two directions (:func:`corner_strength`), without its connected pieces
+    smaller than ``min_px``: a surface matches in blobs, the object's own chance matches (corners of a reflection)
+    in specks."""
+    found = (found & (corner_strength(view.image) > opts.front_corner)).astype(np.uint8)
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(found, connectivity=8)
+    big = np.nonzero(stats[:, cv2.CC_STAT_AREA] >= min_px)[0]
+    return np.isin(labels, big[big > 0])
+
+
+def front_evidence(view: View, others: Sequence[View], plane: Plane, depth: np.ndarray,
                    opts: SegmentOptions) -> np.ndarray:
     """``(H, W)`` bool: textured, unclipped pixels of the sphere's image that a surface between the camera and the
-    hull ``volume < max_votes`` explains (:func:`front_cost`): a prop in front of the object inside the sphere,
-    which the depth sweep outside the sphere cannot see and the hull, knowing nothing of occlusion, covers."""
+    hull explains (:func:`front_cost`; ``depth``: :func:`hull_depth`): a prop in front of the object inside the
+    sphere, which the depth sweep outside the sphere cannot see and the hull, knowing nothing of occlusion,
+    covers."""
     box = sphere_box(view)
     if box is None or not others:
         return np.zeros(view.shape, bool)
-    entry = hull_depth(volume, view, max_votes, box)
-    # Only well inside the hull's image: at its outline a window mixes the object with what is behind it.
-    inner = cv2.erode(np.isfinite(entry).astype(np.uint8), _disc(opts.front_inset_px)) > 0
-    entry = np.where(inner, entry, -np.inf)
+    x0, y0, x1, y1 = box
+    entry = np.where(_inner(np.isfinite(depth), opts), depth, -np.inf)[y0:y1, x0:x1]
     cost = front_cost(view, others, plane, entry, box, opts.occluder_rank, opts.front_step, opts.front_margin)
-    found = _matched(view, cost, box, opts) & (corner_strength(view.image) > opts.front_corner)
-    # A prop's top matches in blobs; the object's own chance matches (corners of a reflection) in specks.
-    return _blobs(found, opts.front_min_px)
-
-
-def _blobs(found: np.ndarray, min_px: int) -> np.ndarray:
-    """``found`` without its connected pieces smaller than ``min_px``."""
-    _, labels, stats, _ = cv2.connectedComponentsWithStats(found.astype(np.uint8), connectivity=8)
-    big = np.nonzero(stats[:, cv2.CC_STAT_AREA] >= min_px)[0]
-    return np.isin(labels, big[big > 0])
+    return _blobs_of_corners(view, _matched(view, cost, box, opts.occluder_threshold, opts), opts.front_min_px, opts)
 
 
 def floor_through_hull(view: View, others: Sequence[View], plane: Plane, hull: np.ndarray,
@@ -631,11 +637,9 @@ def floor_through_hull(view: View, others: Sequence[View], plane: Plane, hull: n
     ``carve_share`` of the views see through it. One view suffices: the few that see through are on every side.
     The object's own matches -- a glossy bottom mirrors the floor next to it -- are flat or edges, and specks."""
     cost = plane_cost(view, others, plane.normal, plane.offset, 1)
-    inner = cv2.erode(hull.astype(np.uint8), _disc(opts.front_inset_px)) > 0
     whole = (0, 0, view.shape[1], view.shape[0])
-    found = _matched(view, cost, whole, replace(opts, occluder_threshold=opts.through_threshold))
-    found &= inner & (corner_strength(view.image) > opts.front_corner)
-    return _blobs(found, opts.through_min_px)
+    found = _matched(view, cost, whole, opts.through_threshold, opts) & _inner(hull, opts)
+    return _blobs_of_corners(view, found, opts.through_min_px, opts)
 
 
 def _floor_from_cost(cost: np.ndarray, outside: np.ndarray, opts: SegmentOptions) -> np.ndarray:
@@ -797,7 +801,8 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
         # Generous early, strict at the end: the first masks (from the sphere prior alone) miss pieces that
         # later rounds, seeded by a hull that kept them, can find again.
         votes = carve_votes(opts, n) + opts.votes_relax * (opts.rounds - 1 - r)
-        hulls = [reproject(volume, v, votes - 0.5) for v in views]
+        depths = [hull_depth(volume, v, votes - 0.5) for v in views]
+        hulls = [np.isfinite(d) for d in depths]
         step("carve")
         # Where this round does not force the hull's core: something seen in front of the hull, or through it.
         released: list[np.ndarray | None] = [None] * n
@@ -805,7 +810,7 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
             # Props in front of the object inside the sphere, found anew against each round's hull (not the first
             # round's: the sphere prior's masks make a hull too loose to have much in front of it).
             released = [np.zeros(v.shape, bool) if i in fixed else
-                        front_evidence(v, [views[j] for j in near[i]], plane, volume, votes - 0.5, opts)
+                        front_evidence(v, [views[j] for j in near[i]], plane, depths[i], opts)
                         for i, v in enumerate(views)]
             _log_found(r, "something in front of the hull", views, released)
         if plane is not None and opts.through_floor and r > 0:

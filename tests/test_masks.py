@@ -26,6 +26,7 @@ from pipeline.silhouette import (
     corner_strength,
     floor_through_hull,
     front_evidence,
+    hull_depth,
     hull_grid,
     iou,
     neighbours,
@@ -168,30 +169,50 @@ def test_corner_strength_is_zero_along_an_edge_and_large_at_corners():
     assert np.percentile(corner_strength(checker)[4:-4, 4:-4], 50) > threshold
 
 
-def prop_in_front_views(n: int = 12) -> tuple[list[View], np.ndarray, list[np.ndarray]]:
-    """A mirror ball (radius 0.4, at the origin; a diffuse label on its top) on the floor z = -0.9, and a prop's
-    textured top -- the square
-    |x - 0.45| < 0.2, |y| < 0.3 at z = 0.5, inside the unit sphere -- between it and the cameras on the +x side;
-    a ring of cameras 50 deg up, at 240x180. Returns the views, the ball's exact hull votes (64^3) and, per view,
-    where the prop's top is seen."""
-    rng = np.random.default_rng(3)
-    cells = rng.integers(0, 256, (16, 16, 3)).astype(np.uint8)  # a texture with corners everywhere
+def cell_texture(seed: int):
+    """``(u, v) -> (..., 3)`` uint8: random colours in unit cells, 16 x 16 repeating -- corners everywhere."""
+    cells = np.random.default_rng(seed).integers(0, 256, (16, 16, 3)).astype(np.uint8)
 
     def texture(u: np.ndarray, v: np.ndarray) -> np.ndarray:
         u, v = (np.floor(np.nan_to_num(a, posinf=0.0, neginf=0.0)).astype(int) % 16 for a in (u, v))
         return cells[u, v]
 
-    views, tops = [], []
-    for view in ring_views(n, size=(240, 180), elevation_deg=50.0):
+    return texture
+
+
+def close_ring(n: int = 12) -> list[View]:
+    """A ring of cameras 50 deg up at 240x180, close enough that a ball of radius 0.4 spans ~50 px."""
+    views = ring_views(n, size=(240, 180), elevation_deg=50.0)
+    for view in views:
         view.K = np.array([[200.0, 0, 120], [0, 200.0, 90], [0, 0, 1]])
+    return views
+
+
+def mirror_ball(view: View, radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Where each pixel's ray meets a ball at the origin: ``(H, W)`` bool hit, ``(H, W)`` distance (``inf``: it
+    misses), ``(H, W, 3)`` the point and the mirrored direction there."""
+    o, d = view.c2w[:3, 3], pixel_rays(view)
+    b = d @ o
+    disc = b * b - (o @ o - radius**2)
+    ball = disc > 0
+    t = -b - np.sqrt(np.maximum(disc, 0))
+    hit = o + d * t[..., None]
+    normal = hit / radius
+    mirrored = d - 2 * (d * normal).sum(-1, keepdims=True) * normal
+    return ball, np.where(ball, t, np.inf), hit, mirrored
+
+
+def prop_in_front_views() -> tuple[list[View], np.ndarray, list[np.ndarray]]:
+    """A mirror ball (radius 0.4, at the origin; a diffuse label on its top) on the floor z = -0.9, and a prop's
+    textured top -- the square |x - 0.45| < 0.2, |y| < 0.3 at z = 0.5, inside the unit sphere -- between it and
+    the cameras on the +x side (:func:`close_ring`). Returns the views, the ball's exact hull votes (64^3) and,
+    per view, where the prop's top is seen."""
+    texture = cell_texture(3)
+    views, tops = close_ring(), []
+    for view in views:
         o, d = view.c2w[:3, 3], pixel_rays(view)
         image = np.full(d.shape, 128, np.uint8)  # flat grey: no texture, nothing to match
-        b = d @ o
-        disc = b * b - (o @ o - 0.16)
-        t_ball = np.where(disc > 0, -b - np.sqrt(np.maximum(disc, 0)), np.inf)
-        hit = o + d * t_ball[..., None]
-        mirrored = d - 2 * (d * hit).sum(-1, keepdims=True) * hit / 0.16  # reflect about the normal hit / 0.4
-        ball = np.isfinite(t_ball)
+        ball, t_ball, hit, mirrored = mirror_ball(view, 0.4)
         image[ball] = texture(4 * mirrored[..., 0] + 8, 4 * mirrored[..., 1] + 8)[ball]
         label = ball & (hit[..., 2] > 0.25)  # a diffuse label on its top: photo-consistent on its own surface
         image[label] = texture(8 * hit[..., 0] + 3, 8 * hit[..., 1] + 3)[label]
@@ -200,7 +221,6 @@ def prop_in_front_views(n: int = 12) -> tuple[list[View], np.ndarray, list[np.nd
         top = (np.abs(p[..., 0] - 0.45) < 0.2) & (np.abs(p[..., 1]) < 0.3) & (t_top < t_ball)
         image[top] = texture(8 * p[..., 0], 8 * p[..., 1])[top]
         view.image = cv2.GaussianBlur(image, (0, 0), 0.7)  # a lens's blur, as in the photos
-        views.append(view)
         tops.append(top)
     ax = (np.arange(64) + 0.5) / 32 - 1
     x, y, z = np.meshgrid(ax, ax, ax, indexing="ij")
@@ -217,7 +237,7 @@ def test_a_prop_in_front_of_the_hull_is_found_and_the_mirror_ball_is_not():
     plane = Plane(np.array([0.0, 0.0, 1.0]), -0.9, 1.0)
     opts = SegmentOptions()
     for i in (0, 6):  # the camera on the +x side, then the one opposite
-        found = front_evidence(views[i], [views[j] for j in near[i]], plane, votes, 0.5, opts)
+        found = front_evidence(views[i], [views[j] for j in near[i]], plane, hull_depth(votes, views[i], 0.5), opts)
         hull = reproject(votes, views[i], 0.5)
         covered = tops[i] & hull
         if i == 0:
@@ -233,36 +253,27 @@ def test_the_floor_seen_through_a_too_large_hull_is_found_and_the_mirror_is_not(
     """A mirror ball (radius 0.4) floating over a textured floor (z = -0.9), every view's hull twice its size
     (as a hull is where few views see past the object): the floor inside the hull's image is found in every view,
     the ball -- which mirrors that very floor -- nowhere."""
-    cells = np.random.default_rng(5).integers(0, 256, (16, 16, 3)).astype(np.uint8)
+    texture = cell_texture(5)
 
     def floor_colour(p: np.ndarray) -> np.ndarray:
-        u, v = (np.floor(8 * np.nan_to_num(p[..., k], posinf=0.0, neginf=0.0)).astype(int) % 16 for k in (0, 1))
-        return cells[u, v]
+        return texture(8 * p[..., 0], 8 * p[..., 1])
 
-    views, balls, floors = [], [], []
-    for view in ring_views(12, size=(240, 180), elevation_deg=50.0):
-        view.K = np.array([[200.0, 0, 120], [0, 200.0, 90], [0, 0, 1]])
+    views, balls = close_ring(), []
+    for view in views:
         o, d = view.c2w[:3, 3], pixel_rays(view)
-        b = d @ o
-        disc = b * b - (o @ o - 0.16)
-        ball = disc > 0
-        hit = o + d * (-b - np.sqrt(np.maximum(disc, 0)))[..., None]
-        mirrored = d - 2 * (d * hit).sum(-1, keepdims=True) * hit / 0.16
-        t_floor = (-0.9 - o[2]) / d[..., 2]
-        image = floor_colour(o + d * t_floor[..., None])
+        ball, _, hit, mirrored = mirror_ball(view, 0.4)
+        image = floor_colour(o + d * ((-0.9 - o[2]) / d[..., 2])[..., None])
         t_mirror = (-0.9 - hit[..., 2]) / mirrored[..., 2]
         seen = floor_colour(hit + mirrored * t_mirror[..., None])
         image[ball] = np.where((t_mirror[ball] > 0)[:, None], seen[ball], 200)  # the floor, or a bright sky
         view.image = cv2.GaussianBlur(image, (0, 0), 0.7)
-        views.append(view)
         balls.append(ball)
-        floors.append(~ball)
     plane = Plane(np.array([0.0, 0.0, 1.0]), -0.9, 1.0)
     for i, view in enumerate(views):
         hull = sphere_distance(view, radius=0.8) < 1.0
         found = floor_through_hull(view, views[:i] + views[i + 1:], plane, hull, SegmentOptions())
         assert (found & balls[i]).sum() == 0
-        assert (found & floors[i] & hull).sum() > 0.5 * (floors[i] & hull).sum()
+        assert (found & ~balls[i] & hull).sum() > 0.5 * (~balls[i] & hull).sum()
 
 
 # ------------------------------------------------------------------------------------------ the stage
