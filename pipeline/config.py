@@ -193,13 +193,17 @@ class MasksConfig(StrictModel):
     )
     front_sweep: bool = Field(
         True, description="from the second round, sweep planes parallel to the floor between each camera and the "
-        "visual hull: a prop in front of the object inside the unit sphere (which the hull covers) is not forced into "
-        "the mask (~1 s per view and round at 320x240 on a CPU core)"
+        "visual hull: the top of a prop standing in front of the object inside the unit sphere (which the hull "
+        "covers), and its side under it, are background (~1 s per view and round at 320x240 on a CPU core)"
     )
     through_floor: bool = Field(
         True, description="from the second round, pixels inside the visual hull's image that the support plane "
         "explains in any other view are certain background: the floor seen through a hole or under an overhang, "
         "which the hull fills when few views see through it"
+    )
+    through_reach_px: int = Field(
+        20, ge=0, description="...and the hull is not forced as object within this many pixels (at work_size) of "
+        "them: GrabCut decides the rest of the hole by colour"
     )
     sphere_margin: float = Field(1.05, ge=1, description="the object's refined bounding sphere is enlarged by this")
     renormalize: bool = Field(

@@ -27,12 +27,16 @@ reprojected into every view, seeds the next round of GrabCut; a few rounds settl
 occlusion: where a prop stands between a camera and the object it covers the prop, and its core would force the
 prop into that view's mask. So, from the second round, planes parallel to the support plane are swept between
 each camera and the hull (:func:`front_evidence`): textured pixels -- texture in two directions, an edge
-alone matches at any depth -- that such a plane explains in the neighbours, in blobs, are a prop's top in front
-of the object: the core is not forced there, and GrabCut decides by colour. And where fewer than
+alone matches at any depth -- that such a plane explains in the neighbours, in blobs, whose column down to the
+floor stays out of the hull (a prop stands beside the object; a chance match on the object's own texture has
+the object under it), are a prop's top in front of the object, and the image of those columns in front of the
+hull is its side: certain background, and the core is not forced next to them. And where fewer than
 ``carve_share`` of the views see through the object -- a hole, the space under a lifted side -- the hull fills
 it; those views' pixels inside the hull's image that the support plane explains in *any* other view (one
 suffices: the views that see through are few and on every side), textured in two directions, in blobs, are the
-floor seen through the hull (:func:`floor_through_hull`): certain background. The final mask of a view is
+floor seen through the hull (:func:`floor_through_hull`): certain background, and the core is not forced within
+``through_reach_px`` of them (they are textured specks of a larger hole; GrabCut decides the rest by colour).
+The final mask of a view is
 the last hull's reprojection within ``final_reach_px`` (1) of that view's last GrabCut mask, less certain
 background: the hull keeps what one view's colours lose inside the object (a glossy rim mirroring the
 background, a dark bottom), the view's own colours trim the hull's overhang at the outline (the hull is
@@ -43,8 +47,9 @@ Failure cases (documented in the README): an object not standing on a visible te
 held, on a textureless table: cue 2 finds nothing and the contact shadow may stay in the masks); an
 object whose colours are those of its surroundings *and* which is seen against them everywhere; fewer than
 ~8 views around the object (the hull then barely constrains anything); a loose unit sphere from ``poses``
-that includes large props (they are carved only where views disagree; the sweep in front of the hull finds their
-tops, not their sides); holes through the object and the space under an overhang that fewer than
+that includes large props (they are carved only where views disagree; the sweep in front of the hull finds
+props that stand on the floor with a textured top: not a prop hanging over the object, nor a round one's side
+beyond its top's outline); holes through the object and the space under an overhang that fewer than
 ``carve_share`` of the views see through, where what shows through is not a textured floor (the hull fills
 them, and inside the hull colour alone does not separate a glossy object from what it mirrors); thin parts
 below the voxel size.
@@ -63,7 +68,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from .object_frame import camera_up, mask_votes
+from .object_frame import camera_up, project
 
 log = logging.getLogger("orca.masks")
 
@@ -137,9 +142,11 @@ class SegmentOptions:
     front_inset_px: int = 3
     front_min_px: int = 40
     front_corner: float = 1.0e-4
+    front_column_share: float = 0.25
     through_floor: bool = True
     through_threshold: float = 0.04
     through_min_px: int = 16
+    through_reach_px: int = 20
 
 
 @dataclass
@@ -377,20 +384,29 @@ OUTSIDE_VOTES = 1.0e3  # the "background votes" of voxels outside the carved reg
 
 
 def carve(masks: Sequence[np.ndarray], views: Sequence[View], points: np.ndarray, index: np.ndarray,
-          resolution: int, weak: Sequence[np.ndarray | None] | None = None, weak_weight: float = 1.0) -> np.ndarray:
+          resolution: int, weights: Sequence[np.ndarray | None] | None = None) -> np.ndarray:
     """``(R, R, R)`` float32 background votes: for each voxel, in how many views that see it it lands off the
     object (:data:`OUTSIDE_VOTES` for voxels outside the region or seen by fewer than half the views). The hull
     is where the votes are below a small number: one view's mistake does not cut the object, while a voxel next
     to a thin object, off its silhouette in only the few views that look along the thin side, is still cut.
-    ``weak``: per view, ``(H, W)`` bool where a background vote counts only ``weak_weight`` (None: fully)."""
+    ``weights``: per view, ``(H, W)`` float32 what a background vote from each pixel counts (None: 1 everywhere;
+    less where the vote is doubtful)."""
     c2w = np.stack([v.c2w for v in views])
     K = np.stack([v.K for v in views])
-    seen, hits = mask_votes(masks, c2w, K, points)
-    off = (seen - hits).astype(np.float32)
-    if weak is not None and weak_weight != 1.0:
-        doubtful = [np.zeros(m.shape, bool) if w is None else w & ~m for m, w in zip(masks, weak)]
-        _, weak_hits = mask_votes(doubtful, c2w, K, points)
-        off -= (1.0 - weak_weight) * weak_hits
+    seen = np.zeros(len(points), np.int32)
+    off = np.zeros(len(points), np.float32)
+    for i, m in enumerate(masks):
+        uv, z = project(points, c2w[i : i + 1], K[i : i + 1])
+        h, w = m.shape
+        x = np.floor(uv[0, :, 0]).astype(np.int64)
+        y = np.floor(uv[0, :, 1]).astype(np.int64)
+        inside = np.nonzero((z[0] > 0) & (x >= 0) & (x < w) & (y >= 0) & (y < h))[0]
+        seen[inside] += 1
+        vote = ~m[y[inside], x[inside]]
+        if weights is not None and weights[i] is not None:
+            off[inside] += vote * weights[i][y[inside], x[inside]]
+        else:
+            off[inside] += vote
     votes = np.where(seen >= 0.5 * len(views), off, OUTSIDE_VOTES).astype(np.float32)
     volume = np.full(resolution**3, OUTSIDE_VOTES, np.float32)
     volume[index] = votes
@@ -508,15 +524,13 @@ def first_seeds(sphere: np.ndarray, background: np.ndarray, seed_radius: float,
 
 
 def hull_seeds(hull: np.ndarray, keep_out: np.ndarray | None, background: np.ndarray, floor: np.ndarray | None,
-               erode_px: int, band_px: int, clipped: np.ndarray | None = None,
-               doubtful: np.ndarray | None = None) -> np.ndarray:
+               erode_px: int, band_px: int, clipped: np.ndarray | None = None) -> np.ndarray:
     """GrabCut labels from the hull's reprojection: certain object in the hull's eroded core (but not in
-    ``keep_out``, near a prop seen in front) and on clipped highlights inside the hull (a glossy object's
-    highlights are white like many backgrounds), probable object in the rest of the hull, probable background
-    in a band around it, certain background beyond and wherever the floor or an occluder was seen -- except the
-    floor inside the hull, which is only probable background: the bottom rim of a glossy object mirrors the floor
-    next to it at grazing angles and passes the floor test. ``doubtful`` (a prop seen in front of the hull) is
-    probable background outside the core."""
+    ``keep_out``, where the hull is known to be wrong) and on clipped highlights inside the hull (a glossy
+    object's highlights are white like many backgrounds), probable object in the rest of the hull, probable
+    background in a band around it, certain background beyond and in ``background`` and wherever the floor was
+    seen -- except the floor inside the hull, which is only probable background: the bottom rim of a glossy object
+    mirrors the floor next to it at grazing angles and passes the floor test."""
     h8 = hull.astype(np.uint8)
     seeds = np.full(hull.shape, cv2.GC_BGD, np.uint8)
     seeds[cv2.dilate(h8, _disc(band_px)) > 0] = cv2.GC_PR_BGD
@@ -530,8 +544,6 @@ def hull_seeds(hull: np.ndarray, keep_out: np.ndarray | None, background: np.nda
     if floor is not None:
         seeds[floor & hull & ~core] = cv2.GC_PR_BGD
         seeds[floor & ~hull] = cv2.GC_BGD
-    if doubtful is not None:
-        seeds[doubtful & ~core] = cv2.GC_PR_BGD
     seeds[background] = cv2.GC_BGD
     return seeds
 
@@ -588,15 +600,18 @@ def front_cost(view: View, others: Sequence[View], plane: Plane, entry: np.ndarr
     o = view.c2w[:3, 3]
     facing = pixel_rays(view, box) @ plane.normal
     best = np.full(entry.shape, np.inf, np.float32)
+    best_height = np.full(entry.shape, np.nan, np.float32)
     for height in np.arange(step, 1.0 - plane.offset, step):
         offset = plane.offset + height
         with np.errstate(divide="ignore", invalid="ignore"):
             t = (offset - plane.normal @ o) / facing
         valid = (t > 0) & (t < entry - margin)
         if valid.any():
-            cost = plane_cost(view, others, plane.normal, offset, rank, box=box)
-            np.minimum(best, np.where(valid, cost, np.inf), out=best)
-    return best
+            cost = np.where(valid, plane_cost(view, others, plane.normal, offset, rank, box=box), np.inf)
+            better = cost < best
+            best[better] = cost[better]
+            best_height[better] = height
+    return best, best_height
 
 
 def _inner(hull: np.ndarray, opts: SegmentOptions) -> np.ndarray:
@@ -614,19 +629,84 @@ def _blobs_of_corners(view: View, found: np.ndarray, min_px: int, opts: SegmentO
     return np.isin(labels, big[big > 0])
 
 
-def front_evidence(view: View, others: Sequence[View], plane: Plane, depth: np.ndarray,
-                   opts: SegmentOptions) -> np.ndarray:
-    """``(H, W)`` bool: textured, unclipped pixels of the sphere's image that a surface between the camera and the
-    hull explains (:func:`front_cost`; ``depth``: :func:`hull_depth`): a prop in front of the object inside the
-    sphere, which the depth sweep outside the sphere cannot see and the hull, knowing nothing of occlusion,
-    covers."""
+def front_evidence(view: View, others: Sequence[View], plane: Plane, depth: np.ndarray, volume: np.ndarray,
+                   max_votes: float, opts: SegmentOptions) -> np.ndarray:
+    """``(H, W)`` bool: a prop between the camera and the object, inside the sphere -- which the depth sweep outside
+    the sphere cannot see and the hull, knowing nothing of occlusion, covers.
+
+    Its top: textured, unclipped pixels of the sphere's image that a plane parallel to the support plane explains
+    between the camera and the hull (:func:`front_cost`; ``depth``: :func:`hull_depth`), in blobs, whose column
+    down to the support plane stays out of the hull ``volume < max_votes`` (:func:`column_in_hull`): a prop stands
+    on the floor beside the object, while a chance match on the object's own texture floats in front of it with
+    the object under it. Its sides: the image of those columns in front of the hull
+    (:func:`column_image`), which planes parallel to the floor do not fit."""
     box = sphere_box(view)
     if box is None or not others:
         return np.zeros(view.shape, bool)
     x0, y0, x1, y1 = box
     entry = np.where(_inner(np.isfinite(depth), opts), depth, -np.inf)[y0:y1, x0:x1]
-    cost = front_cost(view, others, plane, entry, box, opts.occluder_rank, opts.front_step, opts.front_margin)
-    return _blobs_of_corners(view, _matched(view, cost, box, opts.occluder_threshold, opts), opts.front_min_px, opts)
+    cost, heights = front_cost(view, others, plane, entry, box, opts.occluder_rank, opts.front_step, opts.front_margin)
+    tops = _blobs_of_corners(view, _matched(view, cost, box, opts.occluder_threshold, opts), opts.front_min_px, opts)
+    ys, xs = np.nonzero(tops[y0:y1, x0:x1])
+    if len(ys) == 0:
+        return tops
+    points = plane_points(view, ys + y0, xs + x0, plane, heights[ys, xs])
+    standing = np.zeros(view.shape, bool)
+    keep = column_in_hull(points, plane, volume, max_votes, opts.front_step) <= opts.front_column_share
+    standing[ys[keep] + y0, xs[keep] + x0] = True
+    tops = _blobs_of_corners(view, standing, opts.front_min_px, opts)
+    if not tops.any():
+        return tops
+    return tops | column_image(view, points[tops[ys + y0, xs + x0]], plane, depth, opts.front_step, opts.front_margin)
+
+
+def plane_points(view: View, ys: np.ndarray, xs: np.ndarray, plane: Plane, heights: np.ndarray) -> np.ndarray:
+    """``(M, 3)``: where the rays of pixels ``(ys, xs)`` ``(M,)`` meet the planes ``heights`` ``(M,)`` above the
+    support plane."""
+    cam = np.stack([xs + 0.5, ys + 0.5, np.ones(len(xs))], -1) @ np.linalg.inv(view.K).T
+    d = cam @ view.c2w[:3, :3].T
+    o = view.c2w[:3, 3]
+    t = (plane.offset + heights - plane.normal @ o) / (d @ plane.normal)
+    return o + d * t[:, None]
+
+
+def column_in_hull(points: np.ndarray, plane: Plane, volume: np.ndarray, max_votes: float, step: float) -> np.ndarray:
+    """``(M,)``: the share of each point's column down to the support plane (sampled ``step`` apart) that lies in
+    the hull ``volume < max_votes`` (``points`` ``(M, 3)`` above the plane)."""
+    from scipy.ndimage import map_coordinates
+
+    res = volume.shape[0]
+    height = plane.height(points)
+    inside = np.zeros(len(points))
+    count = np.zeros(len(points))
+    for s in np.arange(0.0, float(height.max(initial=0.0)), step):
+        below = s <= height
+        idx = (points[below] - s * plane.normal + 1.0) * (res / 2.0) - 0.5
+        inside[below] += map_coordinates(volume, idx.T, order=1, mode="constant", cval=OUTSIDE_VOTES) < max_votes
+        count[below] += 1
+    return inside / np.maximum(count, 1)
+
+
+def column_image(view: View, points: np.ndarray, plane: Plane, depth: np.ndarray, step: float,
+                 margin: float) -> np.ndarray:
+    """``(H, W)`` bool: the image of the columns under ``points`` ``(M, 3)`` down to the support plane (sampled
+    ``step`` apart) where they are more than ``margin`` in front of the hull (``depth``, :func:`hull_depth`): a
+    box's or a can's side stands under its top."""
+    out = np.zeros(view.shape, bool)
+    if len(points) == 0:
+        return out
+    height = plane.height(points)
+    o = view.c2w[:3, 3]
+    h, w = view.shape
+    for s in np.arange(0.0, float(height.max()), step):
+        p = points[s <= height] - s * plane.normal
+        uv, z = project(p, view.c2w[None], view.K[None])
+        x = np.floor(uv[0, :, 0]).astype(np.int64)
+        y = np.floor(uv[0, :, 1]).astype(np.int64)
+        ok = np.nonzero((z[0] > 0) & (x >= 0) & (x < w) & (y >= 0) & (y < h))[0]
+        front = np.linalg.norm(p[ok] - o, axis=-1) < depth[y[ok], x[ok]] - margin
+        out[y[ok[front]], x[ok[front]]] = True
+    return cv2.morphologyEx(out.astype(np.uint8), cv2.MORPH_CLOSE, _disc(1)) > 0
 
 
 def floor_through_hull(view: View, others: Sequence[View], plane: Plane, hull: np.ndarray,
@@ -682,20 +762,38 @@ def iou(a: np.ndarray, b: np.ndarray) -> float:
 # -------------------------------------------------------------------------------------------- the driver
 
 
-def _doubtful(views: Sequence[View], backgrounds: Sequence[np.ndarray], floors: Sequence[np.ndarray | None],
-              fixed: dict[int, np.ndarray], opts: SegmentOptions) -> list[np.ndarray | None]:
-    """Per view, where a background vote is doubtful: dark pixels (brightest channel <= ``dark_level``) that no
-    evidence confirms as background (outside the sphere, swept, floor) -- a dark object bottom and its dark
-    contact shadow look alike, and views from above lose the bottom by colour."""
+def _released(occluded: np.ndarray | None, front: np.ndarray | None, through: np.ndarray | None,
+              opts: SegmentOptions) -> np.ndarray | None:
+    """``(H, W)`` bool where the hull's core is not forced as object (None: nowhere). The hull knows nothing of
+    occlusion: not near a prop seen in front (within ``occluder_reach_px``). Where the floor shows through the
+    hull the hull is wrong, and the floor found there is a few textured specks of a larger hole: not within
+    ``through_reach_px`` of them, so that GrabCut decides the rest of the hole by colour."""
+    out = None
+    for found, reach in ((occluded, opts.occluder_reach_px), (front, opts.occluder_reach_px),
+                         (through, opts.through_reach_px)):
+        if found is not None and found.any():
+            near = cv2.dilate(found.astype(np.uint8), _disc(reach)) > 0
+            out = near if out is None else out | near
+    return out
+
+
+def vote_weights(views: Sequence[View], backgrounds: Sequence[np.ndarray], floors: Sequence[np.ndarray | None],
+                 fixed: dict[int, np.ndarray], opts: SegmentOptions) -> list[np.ndarray | None]:
+    """Per view, ``(H, W)`` float32 what a background vote counts in :func:`carve` (None: 1 everywhere).
+    ``weak_weight`` on dark pixels (brightest channel <= ``dark_level``) that no evidence confirms as background
+    (outside the sphere, swept, floor): a dark object bottom and its dark contact shadow look alike, and views
+    from above lose the bottom by colour."""
     out: list[np.ndarray | None] = []
     for i, v in enumerate(views):
         if i in fixed:
             out.append(None)
             continue
+        weight = np.ones(v.shape, np.float32)
         sure = backgrounds[i] | (v.image.max(-1) > opts.dark_level)
         if floors[i] is not None:
             sure = sure | floors[i]
-        out.append(~sure)
+        weight[~sure] = opts.weak_weight
+        out.append(weight)
     return out
 
 
@@ -795,33 +893,32 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
     rounds: list[dict[str, float]] = []
     hulls: list[np.ndarray] = []
     volume = np.full((opts.hull_resolution,) * 3, OUTSIDE_VOTES, np.float32)
+    through: list[np.ndarray | None] = [None] * n
+    fronts: list[np.ndarray | None] = [None] * n
     for r in range(opts.rounds):
-        weak = _doubtful(views, backgrounds, floors, fixed, opts) if opts.weak_weight != 1.0 else None
-        volume = carve(masks, views, points, index, opts.hull_resolution, weak, opts.weak_weight)
+        weights = vote_weights(views, backgrounds, floors, fixed, opts)
+        volume = carve(masks, views, points, index, opts.hull_resolution, weights)
         # Generous early, strict at the end: the first masks (from the sphere prior alone) miss pieces that
         # later rounds, seeded by a hull that kept them, can find again.
         votes = carve_votes(opts, n) + opts.votes_relax * (opts.rounds - 1 - r)
         depths = [hull_depth(volume, v, votes - 0.5) for v in views]
         hulls = [np.isfinite(d) for d in depths]
         step("carve")
-        # Where this round does not force the hull's core: something seen in front of the hull, or through it.
-        released: list[np.ndarray | None] = [None] * n
         if plane is not None and opts.front_sweep and r > 0:
             # Props in front of the object inside the sphere, found anew against each round's hull (not the first
             # round's: the sphere prior's masks make a hull too loose to have much in front of it).
-            released = [np.zeros(v.shape, bool) if i in fixed else
-                        front_evidence(v, [views[j] for j in near[i]], plane, depths[i], opts)
-                        for i, v in enumerate(views)]
-            _log_found(r, "something in front of the hull", views, released)
+            fronts = [np.zeros(v.shape, bool) if i in fixed else
+                      front_evidence(v, [views[j] for j in near[i]], plane, depths[i], volume, votes - 0.5, opts)
+                      for i, v in enumerate(views)]
+            _log_found(r, "a prop in front of the hull", views, fronts)
         if plane is not None and opts.through_floor and r > 0:
-            # The floor seen through the hull is certain background: it confirms the view's votes in the next
-            # carve, and no mask keeps it.
             through = [np.zeros(v.shape, bool) if i in fixed else
                        floor_through_hull(v, [w for j, w in enumerate(views) if j != i], plane, hulls[i], opts)
                        for i, v in enumerate(views)]
-            backgrounds = [b | t for b, t in zip(evidence.backgrounds, through)]
-            released = [t if f is None else f | t for f, t in zip(released, through)]
             _log_found(r, "the floor seen through the hull", views, through)
+        # Both are certain background: no mask keeps them, and the floor confirms the view's votes in the next carve.
+        backgrounds = [np.logical_or.reduce([e for e in (b, t, f) if e is not None])
+                       for b, t, f in zip(evidence.backgrounds, through, fronts)]
         if r > 0:
             step("evidence against the hull")
         if plane is not None and opts.floor_visibility:
@@ -839,14 +936,8 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
             if i in fixed:
                 new.append(fixed[i])
             else:
-                # The hull knows nothing of occlusion: its core is not forced onto a prop seen in front.
-                seen = [e for e in (occluded[i], released[i]) if e is not None and e.any()]
-                keep_out = None
-                if seen:
-                    props = np.logical_or.reduce(seen).astype(np.uint8)
-                    keep_out = cv2.dilate(props, _disc(opts.occluder_reach_px)) > 0
-                seeds = hull_seeds(hulls[i], keep_out, backgrounds[i], floors[i], opts.core_erode_px, opts.band_px,
-                                   v.clipped, released[i])
+                seeds = hull_seeds(hulls[i], _released(occluded[i], fronts[i], through[i], opts), backgrounds[i],
+                                   floors[i], opts.core_erode_px, opts.band_px, v.clipped)
                 new.append(grabcut(v.image, seeds, opts.grabcut_iterations))
             step("segment")
         agreement = [iou(a, b) for a, b in zip(new, hulls)]

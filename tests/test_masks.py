@@ -18,11 +18,12 @@ from pipeline.config import MasksConfig, PosesConfig
 from pipeline.errors import InputError
 from pipeline.imageio import read_image, write_png
 from pipeline.silhouette import (
-    OUTSIDE_VOTES,
     Plane,
     SegmentOptions,
     View,
     carve,
+    column_image,
+    column_in_hull,
     corner_strength,
     floor_through_hull,
     front_evidence,
@@ -152,7 +153,7 @@ def test_doubtful_background_votes_count_less():
         doubtful.append(bottom)
     points, index = hull_grid(64, None)
     full = carve(lost, views, points, index, 64)
-    weighted = carve(lost, views, points, index, 64, doubtful, 0.1)
+    weighted = carve(lost, views, points, index, 64, [np.where(d, 0.1, 1.0).astype(np.float32) for d in doubtful])
     for v, m in zip(views[::6], truth[::6]):
         assert iou(reproject(full, v, 4.5), m) < 0.85
         assert iou(reproject(weighted, v, 4.5), m) > 0.9
@@ -202,51 +203,108 @@ def mirror_ball(view: View, radius: float) -> tuple[np.ndarray, np.ndarray, np.n
     return ball, np.where(ball, t, np.inf), hit, mirrored
 
 
-def prop_in_front_views() -> tuple[list[View], np.ndarray, list[np.ndarray]]:
-    """A mirror ball (radius 0.4, at the origin; a diffuse label on its top) on the floor z = -0.9, and a prop's
-    textured top -- the square |x - 0.45| < 0.2, |y| < 0.3 at z = 0.5, inside the unit sphere -- between it and
-    the cameras on the +x side (:func:`close_ring`). Returns the views, the ball's exact hull votes (64^3) and,
-    per view, where the prop's top is seen."""
+FLOOR = Plane(np.array([0.0, 0.0, 1.0]), -0.9, 1.0)
+BOX = (np.array([0.45, -0.3, -0.9]), np.array([0.75, 0.3, 0.5]))  # a box standing on the floor z = -0.9
+
+
+def box_hit(view: View, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where each pixel's ray enters the axis-aligned box ``[lo, hi]``: ``(H, W)`` distance (``inf``: it misses),
+    ``(H, W, 3)`` the point."""
+    o, d = view.c2w[:3, 3], pixel_rays(view)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a, b = (lo - o) / d, (hi - o) / d
+    t0, t1 = np.minimum(a, b).max(-1), np.maximum(a, b).min(-1)
+    t = np.where((t0 <= t1) & (t0 > 0), t0, np.inf)
+    return t, o + d * np.where(np.isfinite(t), t, 0.0)[..., None]
+
+
+def ball_votes(radius: float, resolution: int = 64) -> np.ndarray:
+    """Hull votes of a ball at the origin whose trilinear interpolation is below 0.5 just inside it: 0.5 plus the
+    signed distance from its surface in voxels (votes, like distances, interpolate linearly)."""
+    ax = (np.arange(resolution) + 0.5) / (resolution / 2) - 1
+    x, y, z = np.meshgrid(ax, ax, ax, indexing="ij")
+    return (0.5 + (np.sqrt(x * x + y * y + z * z) - radius) * resolution / 2).astype(np.float32)
+
+
+def prop_in_front_views() -> tuple[list[View], np.ndarray, list[np.ndarray], list[np.ndarray]]:
+    """A mirror ball (radius 0.4, at the origin; a diffuse label on its top) over the floor z = -0.9, a box
+    (:data:`BOX`, textured on every face) standing on the floor inside the unit sphere, between the ball and the
+    cameras on the +x side (:func:`close_ring`), and a textured square hanging over the ball (|x|, |y| < 0.25,
+    z = 0.6): what a chance match on the object's own texture looks like. Returns the views, the ball's hull votes
+    (64^3) and, per view, where the box and the square are seen."""
     texture = cell_texture(3)
-    views, tops = close_ring(), []
+    views, boxes, squares = close_ring(), [], []
     for view in views:
-        o, d = view.c2w[:3, 3], pixel_rays(view)
-        image = np.full(d.shape, 128, np.uint8)  # flat grey: no texture, nothing to match
+        image = np.full(view.image.shape, 128, np.uint8)  # flat grey: no texture, nothing to match
         ball, t_ball, hit, mirrored = mirror_ball(view, 0.4)
         image[ball] = texture(4 * mirrored[..., 0] + 8, 4 * mirrored[..., 1] + 8)[ball]
         label = ball & (hit[..., 2] > 0.25)  # a diffuse label on its top: photo-consistent on its own surface
         image[label] = texture(8 * hit[..., 0] + 3, 8 * hit[..., 1] + 3)[label]
-        t_top = (0.5 - o[2]) / d[..., 2]
-        p = o + d * t_top[..., None]
-        top = (np.abs(p[..., 0] - 0.45) < 0.2) & (np.abs(p[..., 1]) < 0.3) & (t_top < t_ball)
-        image[top] = texture(8 * p[..., 0], 8 * p[..., 1])[top]
+        t_box, p = box_hit(view, *BOX)
+        box = t_box < t_ball
+        # each face's texture in its own two coordinates: the top in (x, y), the +x face in (y, z), ...
+        face = np.argmin(np.abs(np.stack([p - BOX[0], p - BOX[1]], -1)).min(-1), -1)  # the axis the face is normal to
+        u = np.where(face == 0, p[..., 1], p[..., 0])
+        v = np.where(face == 2, p[..., 1], p[..., 2])
+        image[box] = texture(16 * u + 5, 16 * v + 5)[box]
+        o, d = view.c2w[:3, 3], pixel_rays(view)
+        t_square = (0.6 - o[2]) / d[..., 2]
+        q = o + d * t_square[..., None]
+        square = (np.abs(q[..., 0]) < 0.25) & (np.abs(q[..., 1]) < 0.25) & (t_square < np.minimum(t_ball, t_box))
+        image[square] = texture(8 * q[..., 0] + 9, 8 * q[..., 1] + 9)[square]
         view.image = cv2.GaussianBlur(image, (0, 0), 0.7)  # a lens's blur, as in the photos
-        tops.append(top)
-    ax = (np.arange(64) + 0.5) / 32 - 1
-    x, y, z = np.meshgrid(ax, ax, ax, indexing="ij")
-    votes = np.where(x * x + y * y + z * z < 0.16, 0.0, OUTSIDE_VOTES).astype(np.float32)
-    return views, votes, tops
+        boxes.append(box)
+        squares.append(square)
+    return views, ball_votes(0.4), boxes, squares
 
 
 def test_a_prop_in_front_of_the_hull_is_found_and_the_mirror_ball_is_not():
-    """The sweep between camera and hull finds the prop's top where it covers the ball's image (the hull, blind to
-    occlusion, covers it there), and only there: never the ball's label, which matches planes through the ball but
-    not in front of it, nor its reflections; from the other side, the prop beside the ball, it finds nothing."""
-    views, votes, tops = prop_in_front_views()
+    """The sweep between camera and hull finds the box standing in front of the ball where it covers the ball's
+    image (the hull, blind to occlusion, covers it there) -- its top, and its side under the top -- and only
+    there: never the ball's label, which matches planes through the ball but not in front of it, nor its
+    reflections, nor the square hanging over the ball (the ball is under it: no prop stands there); from the other
+    side, the box behind the ball, it finds nothing."""
+    views, votes, boxes, squares = prop_in_front_views()
     near = neighbours(views, 3, 60.0)
-    plane = Plane(np.array([0.0, 0.0, 1.0]), -0.9, 1.0)
     opts = SegmentOptions()
     for i in (0, 6):  # the camera on the +x side, then the one opposite
-        found = front_evidence(views[i], [views[j] for j in near[i]], plane, hull_depth(votes, views[i], 0.5), opts)
-        hull = reproject(votes, views[i], 0.5)
-        covered = tops[i] & hull
+        depth = hull_depth(votes, views[i], 0.5)
+        found = front_evidence(views[i], [views[j] for j in near[i]], FLOOR, depth, votes, 0.5, opts)
+        covered = boxes[i] & np.isfinite(depth)
+        assert (squares[i] & np.isfinite(depth)).sum() > 200
+        assert (found & squares[i]).sum() == 0
         if i == 0:
-            assert covered.sum() > 400
-            assert (found & ~cv2.dilate(tops[i].astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)).sum() == 0
-            assert (found & covered).sum() > 0.4 * covered.sum()
+            top = covered & (box_hit(views[i], *BOX)[1][..., 2] > BOX[1][2] - 1e-6)
+            side = covered & ~top
+            assert top.sum() > 400 and side.sum() > 40
+            assert (found & ~cv2.dilate(boxes[i].astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)).sum() == 0
+            assert (found & top).sum() > 0.4 * top.sum()
+            assert (found & side).sum() > 0.6 * side.sum()  # no plane parallel to the floor explains a side
         else:
             assert covered.sum() == 0
             assert found.sum() == 0
+
+
+def test_a_column_through_the_hull_is_measured_and_one_beside_it_is_not():
+    """The share of a point's column down to the floor z = -0.9 inside a ball of radius 0.5: over the centre,
+    from z = 0.9, the ball's diameter 1.0 of 1.8; at x = 0.3 the chord 0.8 of 1.6; beside the ball none."""
+    points = np.array([[0.0, 0.0, 0.9], [0.3, 0.0, 0.7], [0.7, 0.0, 0.5], [0.0, 0.6, 0.2]])
+    share = column_in_hull(points, FLOOR, ball_votes(0.5), 0.5, 0.01)
+    np.testing.assert_allclose(share, [1.0 / 1.8, 0.8 / 1.6, 0.0, 0.0], atol=0.01)
+
+
+def test_the_columns_under_a_box_top_image_the_box_where_it_is_in_front_of_the_hull():
+    """The columns under points of a box's top, down to the floor, are the box: their image is the box's
+    silhouette; in front of a hull that starts nearer than the box, nothing."""
+    view = close_ring()[0]
+    lo, hi = BOX
+    g = np.stack(np.meshgrid(np.linspace(lo[0], hi[0], 61), np.linspace(lo[1], hi[1], 121), indexing="ij"), -1)
+    top = np.concatenate([g.reshape(-1, 2), np.full((g[..., 0].size, 1), hi[2])], -1)
+    truth = np.isfinite(box_hit(view, lo, hi)[0])
+    far = np.full(view.shape, np.inf, np.float32)
+    assert truth.sum() > 1000
+    assert iou(column_image(view, top, FLOOR, far, 0.005, 0.1), truth) > 0.93
+    assert not column_image(view, top, FLOOR, np.full(view.shape, 1.0, np.float32), 0.005, 0.1).any()
 
 
 def test_the_floor_seen_through_a_too_large_hull_is_found_and_the_mirror_is_not():
@@ -268,10 +326,9 @@ def test_the_floor_seen_through_a_too_large_hull_is_found_and_the_mirror_is_not(
         image[ball] = np.where((t_mirror[ball] > 0)[:, None], seen[ball], 200)  # the floor, or a bright sky
         view.image = cv2.GaussianBlur(image, (0, 0), 0.7)
         balls.append(ball)
-    plane = Plane(np.array([0.0, 0.0, 1.0]), -0.9, 1.0)
     for i, view in enumerate(views):
         hull = sphere_distance(view, radius=0.8) < 1.0
-        found = floor_through_hull(view, views[:i] + views[i + 1:], plane, hull, SegmentOptions())
+        found = floor_through_hull(view, views[:i] + views[i + 1:], FLOOR, hull, SegmentOptions())
         assert (found & balls[i]).sum() == 0
         assert (found & ~balls[i] & hull).sum() > 0.5 * (~balls[i] & hull).sum()
 

@@ -7,9 +7,8 @@ resampled the photos: the masks are in the pixel grid of the images training rea
 **Automatic masks** (no downloaded weights): :mod:`pipeline.silhouette` -- the unit sphere's image as a prior,
 the support plane found by photo-consistency (the floor and its shadows are background), a depth sweep
 outside the sphere (props in front, the room behind) and, against each round's hull, one between the cameras and
-the hull (props in front inside the sphere), the floor seen through the hull (holes, overhangs), GrabCut per
-view, made to agree by visual-hull carving,
-a few rounds. Segmentation runs at ``masks.work_size``; the masks are written at full size, their outline
+the hull (props standing in front inside the sphere: their tops and the sides under them), the floor seen
+through the hull (holes, overhangs), GrabCut per view, made to agree by visual-hull carving, a few rounds. Segmentation runs at ``masks.work_size``; the masks are written at full size, their outline
 snapped to the photo's edges by a guided filter. The method's failure cases are in that module's doc and
 the README.
 
@@ -375,7 +374,7 @@ def _segment_options(config: MasksConfig) -> Any:
         occluder_rank=config.sweep_rank, occluder_threshold=config.sweep_threshold,
         texture_threshold=config.texture_threshold, weak_weight=config.doubtful_vote, dark_level=config.dark_level,
         final_reach_px=config.final_reach_px, front_sweep=config.front_sweep,
-        through_floor=config.through_floor,
+        through_floor=config.through_floor, through_reach_px=config.through_reach_px,
     )
 
 
