@@ -591,12 +591,13 @@ def _matched(view: View, cost: np.ndarray, box: tuple[int, int, int, int], thres
 
 
 def front_cost(view: View, others: Sequence[View], plane: Plane, entry: np.ndarray, box: tuple[int, int, int, int],
-               rank: int, step: float, margin: float) -> np.ndarray:
+               rank: int, step: float, margin: float) -> tuple[np.ndarray, np.ndarray]:
     """``(h, w)`` float32 over ``box``: how well something *inside* the unit sphere but in front of the object's
     hull explains each pixel -- the best :func:`plane_cost` over planes parallel to the support plane (a prop's
     top), from ``step`` above it to the top of the sphere, ``step`` apart, counting only where the pixel's ray
     meets the plane more than ``margin`` before it enters the hull (``entry``, :func:`hull_depth`): the object is
-    never in front of its hull, a prop the loose sphere holds can be."""
+    never in front of its hull, a prop the loose sphere holds can be. And ``(h, w)`` float32 the best plane's
+    height above the support plane (NaN: none counted)."""
     o = view.c2w[:3, 3]
     facing = pixel_rays(view, box) @ plane.normal
     best = np.full(entry.shape, np.inf, np.float32)

@@ -8,9 +8,9 @@ resampled the photos: the masks are in the pixel grid of the images training rea
 the support plane found by photo-consistency (the floor and its shadows are background), a depth sweep
 outside the sphere (props in front, the room behind) and, against each round's hull, one between the cameras and
 the hull (props standing in front inside the sphere: their tops and the sides under them), the floor seen
-through the hull (holes, overhangs), GrabCut per view, made to agree by visual-hull carving, a few rounds. Segmentation runs at ``masks.work_size``; the masks are written at full size, their outline
-snapped to the photo's edges by a guided filter. The method's failure cases are in that module's doc and
-the README.
+through the hull (holes, overhangs), GrabCut per view, made to agree by visual-hull carving, a few rounds.
+Segmentation runs at ``masks.work_size``; the masks are written at full size, their outline snapped to the
+photo's edges by a guided filter. The method's failure cases are in that module's doc and the README.
 
 **User masks** (``CAPTURE/masks/`` or ``--user-masks``; ``masks.user_masks=ignore`` to skip them): one
 image per photo, named like the photo (``IMG_0001.png`` for ``IMG_0001.dng``), white (non-zero) = object.
