@@ -905,23 +905,22 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
         depths = [hull_depth(volume, v, votes - 0.5) for v in views]
         hulls = [np.isfinite(d) for d in depths]
         step("carve")
-        if plane is not None and opts.front_sweep and r > 0:
-            # Props in front of the object inside the sphere, found anew against each round's hull (not the first
-            # round's: the sphere prior's masks make a hull too loose to have much in front of it).
-            fronts = [np.zeros(v.shape, bool) if i in fixed else
-                      front_evidence(v, [views[j] for j in near[i]], plane, depths[i], volume, votes - 0.5, opts)
-                      for i, v in enumerate(views)]
+        if r > 0:
+            for i, v in enumerate(views):
+                if plane is not None and i not in fixed and opts.front_sweep:
+                    # Props in front of the object inside the sphere, found anew against each round's hull (not the
+                    # first round's: the sphere prior's masks make a hull too loose to have much in front of it).
+                    fronts[i] = front_evidence(v, [views[j] for j in near[i]], plane, depths[i], volume, votes - 0.5,
+                                               opts)
+                if plane is not None and i not in fixed and opts.through_floor:
+                    through[i] = floor_through_hull(v, [w for j, w in enumerate(views) if j != i], plane, hulls[i],
+                                                    opts)
+                step("evidence against the hull")
             _log_found(r, "a prop in front of the hull", views, fronts)
-        if plane is not None and opts.through_floor and r > 0:
-            through = [np.zeros(v.shape, bool) if i in fixed else
-                       floor_through_hull(v, [w for j, w in enumerate(views) if j != i], plane, hulls[i], opts)
-                       for i, v in enumerate(views)]
             _log_found(r, "the floor seen through the hull", views, through)
         # Both are certain background: no mask keeps them, and the floor confirms the view's votes in the next carve.
         backgrounds = [np.logical_or.reduce([e for e in (b, t, f) if e is not None])
                        for b, t, f in zip(evidence.backgrounds, through, fronts)]
-        if r > 0:
-            step("evidence against the hull")
         if plane is not None and opts.floor_visibility:
             # Again, now that the hull tells which neighbours see each floor point: the shadowed floor under an
             # overhang is hidden from most neighbours, and they must not vote against it. Only the hull's part

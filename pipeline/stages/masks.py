@@ -284,8 +284,10 @@ def run_masks(
             log.info("every view has a user mask: the automatic method is skipped")
             final, plane, rounds = [fixed[i] for i in range(len(views))], None, []
         else:
-            auto = len(views) - len(fixed)
-            task = bar.add_task("segment", total=(2 * auto + 2) + opts.rounds * (auto + 2) - 1)
+            # the support plane, floor and first GrabCut per view; per round the carve, GrabCut per view and, from
+            # the second, the evidence against the hull per view
+            n = len(views)
+            task = bar.add_task("segment", total=1 + 2 * n + opts.rounds * (1 + n) + (opts.rounds - 1) * n)
             seg = segment(views, opts, fixed=fixed, on_step=lambda label: bar.advance(task))
             final, plane, rounds = seg.masks, seg.plane, seg.rounds
 
