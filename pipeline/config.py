@@ -205,6 +205,10 @@ class MasksConfig(StrictModel):
         20, ge=0, description="...and the hull is not forced as object within this many pixels (at work_size) of "
         "them: GrabCut decides the rest of the hole by colour"
     )
+    through_views: int = Field(
+        40, ge=1, description="...compared with at most this many other views, spread around the object (the test "
+        "costs this many image warps per view and round; with more photos, a subset on every side)"
+    )
     sphere_margin: float = Field(1.05, ge=1, description="the object's refined bounding sphere is enlarged by this")
     renormalize: bool = Field(
         True, description="write cameras.json in the frame where the refined sphere is the unit sphere (tight "

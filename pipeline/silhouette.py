@@ -147,6 +147,7 @@ class SegmentOptions:
     through_threshold: float = 0.04
     through_min_px: int = 16
     through_reach_px: int = 20
+    through_views: int = 40
 
 
 @dataclass
@@ -222,6 +223,29 @@ def neighbours(views: Sequence[View], count: int, max_deg: float, min_deg: float
     for i in range(len(views)):
         order = [j for j in np.argsort(angles[i]) if j != i and min_deg <= angles[i, j] <= max_deg]
         out.append(order[:count])
+    return out
+
+
+def spread(views: Sequence[View], count: int) -> list[list[int]]:
+    """For each view, up to ``count`` of the other views spread around the object: all of them when there are
+    that few, else greedily the one whose direction from the object centre is farthest from those already taken
+    (the first: the farthest from the view itself). Tests that need views on every side, not the nearest, cost
+    ``count`` per view instead of all of them."""
+    centres = np.stack([v.c2w[:3, 3] for v in views])
+    dirs = centres / np.linalg.norm(centres, axis=1, keepdims=True)
+    out = []
+    for i in range(len(views)):
+        others = [j for j in range(len(views)) if j != i]
+        if len(others) <= count:
+            out.append(others)
+            continue
+        nearest = dirs[others] @ dirs[i]  # cosine to the nearest taken direction, for each candidate
+        taken: list[int] = []
+        for _ in range(count):
+            k = int(np.argmin(nearest))
+            taken.append(others[k])
+            nearest = np.maximum(nearest, dirs[others] @ dirs[others[k]])
+        out.append(sorted(taken))
     return out
 
 
@@ -713,7 +737,8 @@ def column_image(view: View, points: np.ndarray, plane: Plane, depth: np.ndarray
 def floor_through_hull(view: View, others: Sequence[View], plane: Plane, hull: np.ndarray,
                        opts: SegmentOptions) -> np.ndarray:
     """``(H, W)`` bool: pixels well inside the hull's reprojection ``hull`` that the support plane explains in at
-    least one of ``others`` (every other view), textured in two directions (:func:`corner_strength`), in blobs:
+    least one of ``others`` (other views, on every side: :func:`spread`), textured in two directions
+    (:func:`corner_strength`), in blobs:
     the floor seen through a hole in the object or under an overhang, which the hull fills because fewer than
     ``carve_share`` of the views see through it. One view suffices: the few that see through are on every side.
     The object's own matches -- a glossy bottom mirrors the floor next to it -- are flat or edges, and specks."""
@@ -890,6 +915,7 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
     masks = list(evidence.masks)
     nbrs = neighbours(views, opts.neighbours, opts.neighbour_max_deg)
     near = neighbours(views, opts.occluder_neighbours, opts.neighbour_max_deg)
+    around = spread(views, opts.through_views)
     points, index = hull_grid(opts.hull_resolution, plane)
     rounds: list[dict[str, float]] = []
     hulls: list[np.ndarray] = []
@@ -913,8 +939,7 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
                     fronts[i] = front_evidence(v, [views[j] for j in near[i]], plane, depths[i], volume, votes - 0.5,
                                                opts)
                 if plane is not None and i not in fixed and opts.through_floor:
-                    through[i] = floor_through_hull(v, [w for j, w in enumerate(views) if j != i], plane, hulls[i],
-                                                    opts)
+                    through[i] = floor_through_hull(v, [views[j] for j in around[i]], plane, hulls[i], opts)
                 step("evidence against the hull")
             _log_found(r, "a prop in front of the hull", views, fronts)
             _log_found(r, "the floor seen through the hull", views, through)

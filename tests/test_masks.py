@@ -35,6 +35,7 @@ from pipeline.silhouette import (
     plane_homography,
     reproject,
     sphere_distance,
+    spread,
 )
 from pipeline.stages.masks import find_user_masks, read_user_mask
 
@@ -157,6 +158,15 @@ def test_doubtful_background_votes_count_less():
     for v, m in zip(views[::6], truth[::6]):
         assert iou(reproject(full, v, 4.5), m) < 0.85
         assert iou(reproject(weighted, v, 4.5), m) > 0.9
+
+
+def test_views_spread_around_the_object_are_picked_greedily_far_apart():
+    """From a ring of 12, three views for view 0: the opposite one, then the two at right angles to both; with
+    room for every other view, all of them."""
+    views = ring_views(12)
+    assert spread(views, 3)[0] == [3, 6, 9]
+    assert spread(views, 3)[4] == [1, 7, 10]
+    assert spread(views, 11)[0] == list(range(1, 12))
 
 
 def test_corner_strength_is_zero_along_an_edge_and_large_at_corners():

@@ -377,6 +377,7 @@ def _segment_options(config: MasksConfig) -> Any:
         texture_threshold=config.texture_threshold, weak_weight=config.doubtful_vote, dark_level=config.dark_level,
         final_reach_px=config.final_reach_px, front_sweep=config.front_sweep,
         through_floor=config.through_floor, through_reach_px=config.through_reach_px,
+        through_views=config.through_views,
     )
 
 
