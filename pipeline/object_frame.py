@@ -144,6 +144,18 @@ def footprint_radius(center: np.ndarray, c2w: np.ndarray, K: np.ndarray, sizes: 
     return float(np.median(dist * np.sin(np.arctan(half))))
 
 
+def pixels_of(points: np.ndarray, c2w: np.ndarray, K: np.ndarray,
+              shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Which of ``points`` ``(M, 3)`` one camera (c2w ``(4, 4)``, K ``(3, 3)``) sees inside its ``(H, W)`` image:
+    their indices ``(V,)`` and integer pixels ``x``, ``y`` ``(V,)``."""
+    uv, z = project(points, c2w[None], K[None])
+    h, w = shape
+    x = np.floor(uv[0, :, 0]).astype(np.int64)
+    y = np.floor(uv[0, :, 1]).astype(np.int64)
+    inside = np.nonzero((z[0] > 0) & (x >= 0) & (x < w) & (y >= 0) & (y < h))[0]
+    return inside, x[inside], y[inside]
+
+
 def mask_votes(masks: Sequence[np.ndarray], c2w: np.ndarray, K: np.ndarray,
                points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """For each point, in how many photos it projects inside the image (``seen``) and onto the object (``hits``).
@@ -158,13 +170,9 @@ def mask_votes(masks: Sequence[np.ndarray], c2w: np.ndarray, K: np.ndarray,
     seen = np.zeros(len(points), np.int32)
     hits = np.zeros(len(points), np.int32)
     for m, c, k in zip(masks, c2w, K):
-        uv, z = project(points, c[None], k[None])
-        h, w = m.shape
-        x = np.floor(uv[0, :, 0]).astype(np.int64)
-        y = np.floor(uv[0, :, 1]).astype(np.int64)
-        inside = (z[0] > 0) & (x >= 0) & (x < w) & (y >= 0) & (y < h)
-        seen += inside
-        hits[inside] += m[y[inside], x[inside]]
+        inside, x, y = pixels_of(points, c, k, m.shape)
+        seen[inside] += 1
+        hits[inside] += m[y, x]
     return seen, hits
 
 

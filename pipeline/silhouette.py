@@ -68,7 +68,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from .object_frame import camera_up, project
+from .object_frame import camera_up, pixels_of
 
 log = logging.getLogger("orca.masks")
 
@@ -415,22 +415,13 @@ def carve(masks: Sequence[np.ndarray], views: Sequence[View], points: np.ndarray
     to a thin object, off its silhouette in only the few views that look along the thin side, is still cut.
     ``weights``: per view, ``(H, W)`` float32 what a background vote from each pixel counts (None: 1 everywhere;
     less where the vote is doubtful)."""
-    c2w = np.stack([v.c2w for v in views])
-    K = np.stack([v.K for v in views])
     seen = np.zeros(len(points), np.int32)
     off = np.zeros(len(points), np.float32)
-    for i, m in enumerate(masks):
-        uv, z = project(points, c2w[i : i + 1], K[i : i + 1])
-        h, w = m.shape
-        x = np.floor(uv[0, :, 0]).astype(np.int64)
-        y = np.floor(uv[0, :, 1]).astype(np.int64)
-        inside = np.nonzero((z[0] > 0) & (x >= 0) & (x < w) & (y >= 0) & (y < h))[0]
+    for i, (m, v) in enumerate(zip(masks, views)):
+        inside, x, y = pixels_of(points, v.c2w, v.K, m.shape)
         seen[inside] += 1
-        vote = ~m[y[inside], x[inside]]
-        if weights is not None and weights[i] is not None:
-            off[inside] += vote * weights[i][y[inside], x[inside]]
-        else:
-            off[inside] += vote
+        vote = ~m[y, x]
+        off[inside] += vote if weights is None or weights[i] is None else vote * weights[i][y, x]
     votes = np.where(seen >= 0.5 * len(views), off, OUTSIDE_VOTES).astype(np.float32)
     volume = np.full(resolution**3, OUTSIDE_VOTES, np.float32)
     volume[index] = votes
@@ -449,18 +440,24 @@ def carve_votes(opts: SegmentOptions, views: int) -> float:
     return max(opts.carve_votes, round(opts.carve_share * views))
 
 
-def hull_depth(volume: np.ndarray, view: View, max_votes: float) -> np.ndarray:
-    """``(H, W)`` float32: the distance along each pixel's ray to where it enters the hull ``volume < max_votes``
-    (trilinear, so the outline is finer than the voxels; ``inf``: it misses), marching in steps of half a voxel
-    through the unit sphere."""
+def in_hull(volume: np.ndarray, points: np.ndarray, max_votes: float) -> np.ndarray:
+    """``(M,)`` bool: which of ``points`` ``(M, 3)`` lie in the hull ``volume < max_votes`` (``volume``: votes over
+    the grid on [-1, 1]^3, interpolated trilinearly, so the outline is finer than the voxels)."""
     from scipy.ndimage import map_coordinates
 
+    res = volume.shape[0]
+    idx = (points + 1.0) * (res / 2.0) - 0.5
+    return map_coordinates(volume, idx.T, order=1, mode="constant", cval=OUTSIDE_VOTES) < max_votes
+
+
+def hull_depth(volume: np.ndarray, view: View, max_votes: float) -> np.ndarray:
+    """``(H, W)`` float32: the distance along each pixel's ray to where it enters the hull ``volume < max_votes``
+    (:func:`in_hull`; ``inf``: it misses), marching in steps of half a voxel through the unit sphere."""
     out = np.full(view.shape, np.inf, np.float32)
     box = sphere_box(view)
     if box is None:
         return out
     x0, y0, x1, y1 = box
-    res = volume.shape[0]
     d = pixel_rays(view, box).reshape(-1, 3)
     o = view.c2w[:3, 3]
     b = d @ o
@@ -468,13 +465,11 @@ def hull_depth(volume: np.ndarray, view: View, max_votes: float) -> np.ndarray:
     hit = np.nonzero(disc > 0)[0]
     d, b, root = d[hit], b[hit], np.sqrt(disc[hit])
     t0, t1 = -b - root, -b + root
-    steps = int(np.ceil(2.0 * res))  # the diameter (2) in half voxels (2 / res each)
+    steps = int(np.ceil(2.0 * volume.shape[0]))  # the diameter (2) in half voxels (2 / res each)
     entry = np.full(len(d), np.inf, np.float32)
     for k in range(steps):
         t = t0 + (t1 - t0) * ((k + 0.5) / steps)
-        idx = (o + d * t[:, None] + 1.0) * (res / 2.0) - 0.5
-        inside = map_coordinates(volume, idx.T, order=1, mode="constant", cval=OUTSIDE_VOTES) < max_votes
-        np.minimum(entry, np.where(inside, t, np.inf), out=entry)
+        np.minimum(entry, np.where(in_hull(volume, o + d * t[:, None], max_votes), t, np.inf), out=entry)
     flat = np.full((y1 - y0) * (x1 - x0), np.inf, np.float32)
     flat[hit] = entry
     out[y0:y1, x0:x1] = flat.reshape(y1 - y0, x1 - x0)
@@ -675,7 +670,7 @@ def front_evidence(view: View, others: Sequence[View], plane: Plane, depth: np.n
     ys, xs = np.nonzero(tops[y0:y1, x0:x1])
     if len(ys) == 0:
         return tops
-    points = plane_points(view, ys + y0, xs + x0, plane, heights[ys, xs])
+    points = plane_points(view.c2w[:3, 3], pixel_rays(view, box)[ys, xs], plane, heights[ys, xs])
     standing = np.zeros(view.shape, bool)
     keep = column_in_hull(points, plane, volume, max_votes, opts.front_step) <= opts.front_column_share
     standing[ys[keep] + y0, xs[keep] + x0] = True
@@ -685,29 +680,22 @@ def front_evidence(view: View, others: Sequence[View], plane: Plane, depth: np.n
     return tops | column_image(view, points[tops[ys + y0, xs + x0]], plane, depth, opts.front_step, opts.front_margin)
 
 
-def plane_points(view: View, ys: np.ndarray, xs: np.ndarray, plane: Plane, heights: np.ndarray) -> np.ndarray:
-    """``(M, 3)``: where the rays of pixels ``(ys, xs)`` ``(M,)`` meet the planes ``heights`` ``(M,)`` above the
+def plane_points(origin: np.ndarray, rays: np.ndarray, plane: Plane, heights: np.ndarray) -> np.ndarray:
+    """``(M, 3)``: where ``rays`` ``(M, 3)`` from ``origin`` ``(3,)`` meet the planes ``heights`` ``(M,)`` above the
     support plane."""
-    cam = np.stack([xs + 0.5, ys + 0.5, np.ones(len(xs))], -1) @ np.linalg.inv(view.K).T
-    d = cam @ view.c2w[:3, :3].T
-    o = view.c2w[:3, 3]
-    t = (plane.offset + heights - plane.normal @ o) / (d @ plane.normal)
-    return o + d * t[:, None]
+    t = (plane.offset + heights - plane.normal @ origin) / (rays @ plane.normal)
+    return origin + rays * t[:, None]
 
 
 def column_in_hull(points: np.ndarray, plane: Plane, volume: np.ndarray, max_votes: float, step: float) -> np.ndarray:
     """``(M,)``: the share of each point's column down to the support plane (sampled ``step`` apart) that lies in
-    the hull ``volume < max_votes`` (``points`` ``(M, 3)`` above the plane)."""
-    from scipy.ndimage import map_coordinates
-
-    res = volume.shape[0]
+    the hull ``volume < max_votes`` (:func:`in_hull`; ``points`` ``(M, 3)`` above the plane)."""
     height = plane.height(points)
     inside = np.zeros(len(points))
     count = np.zeros(len(points))
     for s in np.arange(0.0, float(height.max(initial=0.0)), step):
         below = s <= height
-        idx = (points[below] - s * plane.normal + 1.0) * (res / 2.0) - 0.5
-        inside[below] += map_coordinates(volume, idx.T, order=1, mode="constant", cval=OUTSIDE_VOTES) < max_votes
+        inside[below] += in_hull(volume, points[below] - s * plane.normal, max_votes)
         count[below] += 1
     return inside / np.maximum(count, 1)
 
@@ -722,15 +710,11 @@ def column_image(view: View, points: np.ndarray, plane: Plane, depth: np.ndarray
         return out
     height = plane.height(points)
     o = view.c2w[:3, 3]
-    h, w = view.shape
     for s in np.arange(0.0, float(height.max()), step):
         p = points[s <= height] - s * plane.normal
-        uv, z = project(p, view.c2w[None], view.K[None])
-        x = np.floor(uv[0, :, 0]).astype(np.int64)
-        y = np.floor(uv[0, :, 1]).astype(np.int64)
-        ok = np.nonzero((z[0] > 0) & (x >= 0) & (x < w) & (y >= 0) & (y < h))[0]
-        front = np.linalg.norm(p[ok] - o, axis=-1) < depth[y[ok], x[ok]] - margin
-        out[y[ok[front]], x[ok[front]]] = True
+        seen, x, y = pixels_of(p, view.c2w, view.K, view.shape)
+        front = np.linalg.norm(p[seen] - o, axis=-1) < depth[y, x] - margin
+        out[y[front], x[front]] = True
     return cv2.morphologyEx(out.astype(np.uint8), cv2.MORPH_CLOSE, _disc(1)) > 0
 
 
