@@ -139,6 +139,11 @@ class MasksConfig(StrictModel):
         description="'auto': masks in CAPTURE/masks (or --user-masks) replace the automatic ones for the views they "
         "cover (all views, or corrections for a few); 'ignore': always automatic.",
     )
+    user_mask_min_fraction: float = Field(
+        0.001, ge=0, lt=1, description="a user mask covering less of its image than this (empty, or a stray brush "
+        "stroke) stops the stage naming the file: one empty view cuts the object out of the visual hull; 0: accept "
+        "empty masks (the object is really out of those photos; masks that are all empty are always refused)"
+    )
     work_size: int = Field(
         480, ge=64, description="segmentation runs on images reduced to this longest side (masks are written at "
         "full size, their outline snapped to the photo's edges)"

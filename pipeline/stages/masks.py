@@ -17,17 +17,20 @@ image per photo, named like the photo (``IMG_0001.png`` for ``IMG_0001.dng``), w
 Any common encoding is read: 8/16-bit grey 0/255 (or 0/65535), 0/1, RGB, or an alpha channel (a cut-out PNG:
 the alpha is the mask when it is not constant). They may cover every photo (the automatic method is then not
 run) or only a few (corrections: they replace those views' masks and take part in every carve, so they also
-improve the others). Files whose name matches no photo, a mask of another aspect ratio, an unreadable file or
-a multi-page TIFF stop the stage with an :class:`~pipeline.errors.InputError` naming the file and the fix;
+improve the others). Files whose name matches no photo, a mask of another aspect ratio, an empty or nearly
+empty mask (under ``masks.user_mask_min_fraction`` of the image; only empty ones: always), an unreadable file
+or a multi-page TIFF stop the stage with an :class:`~pipeline.errors.InputError` naming the files and the fix;
 a mask at another size with the photo's aspect ratio (drawn on the original while decode downscaled) is
-resized, with a log line. Drawn on the photos, they are resampled like the photos when the poses stage
-undistorted them (its ``undistorted/decode.json`` records the lenses).
+resized, with a log line (:mod:`pipeline.mask_size`, training's rule too). Masks of photos that got no camera
+(SfM dropped them) are skipped, with a log line. Drawn on the photos, they are resampled like the photos when
+the poses stage undistorted them (its ``undistorted/decode.json`` records the lenses).
 
 **Bounding sphere**: the visual hull of the final masks (:func:`pipeline.object_frame.sphere_from_masks`,
 the poses stage's function) is the object's bounding sphere, recorded in ``masks_report.json`` as
 ``object_sphere`` (poses frame) and used to write ``cameras.json`` re-normalized so that the sphere
 (times ``masks.sphere_margin``) is the unit sphere: training's bounds are then tight. ``frame.to_colmap``
-composes, so exports in COLMAP units stay right.
+composes, so exports in COLMAP units stay right. When the hull is empty the poses stage's sphere is kept and
+``object_sphere`` says so (``fallback``, ``from``).
 
 Outputs (``out_dir``, written atomically): ``masks/<name>.png`` (0/255 at the image's full size),
 ``cameras.json`` (re-normalized; ``masks.renormalize=false``: the poses frame), ``overlays/<name>.jpg``
@@ -43,6 +46,7 @@ import argparse
 import logging
 import os
 import time
+from collections.abc import Collection
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -85,17 +89,24 @@ class MasksResult:
 # ---------------------------------------------------------------------------------------------- user masks
 
 
-def find_user_masks(folder: Path, names: list[str]) -> dict[str, Path]:
+def find_user_masks(folder: Path, names: list[str], no_camera: Collection[str] = ()) -> dict[str, Path]:
     """``name -> file`` for the mask images in ``folder`` (see the module doc); every file must match a photo.
+
+    Args:
+        names: the photos with a camera.
+        no_camera: photos that exist but got no camera (SfM did not register them): their masks are skipped
+            with a log line, as the photos are.
 
     Raises:
         InputError: a file that matches no photo (listing them and a few photo names), two files for one photo.
     """
     if not folder.is_dir():
         raise InputError("user masks folder not found", folder, fix="pass a folder of <photo name>.png masks")
-    known = set(names)
+    known, dropped = set(names), set(no_camera)
+    photos = known | dropped
     found: dict[str, Path] = {}
     unmatched: list[str] = []
+    skipped: list[str] = []
     for path in sorted(folder.iterdir()):
         if path.name.startswith(".") or not path.is_file():
             continue
@@ -103,8 +114,11 @@ def find_user_masks(folder: Path, names: list[str]) -> dict[str, Path]:
             log.warning("%s: not a mask image (%s); skipped", path, ", ".join(MASK_SUFFIXES))
             continue
         stem = path.stem
-        if stem not in known and Path(stem).stem in known:  # IMG_0001.jpg.png (COLMAP's naming)
+        if stem not in photos and Path(stem).stem in photos:  # IMG_0001.jpg.png (COLMAP's naming)
             stem = Path(stem).stem
+        if stem in dropped:
+            skipped.append(path.name)
+            continue
         if stem not in known:
             unmatched.append(path.name)
             continue
@@ -119,6 +133,9 @@ def find_user_masks(folder: Path, names: list[str]) -> dict[str, Path]:
             + (" ..." if len(unmatched) > 10 else "") + f" (photos: {sample})",
             folder, fix="name each mask like its photo (IMG_0001.png for IMG_0001.dng), or remove the extra files",
         )
+    if skipped:
+        log.info("%d user mask(s) skipped: their photos have no camera (the poses stage did not register them): %s",
+                 len(skipped), ", ".join(skipped[:10]) + (" ..." if len(skipped) > 10 else ""))
     return found
 
 
@@ -129,9 +146,8 @@ def read_user_mask(path: Path, size: tuple[int, int]) -> np.ndarray:
     Raises:
         InputError: unreadable, or an aspect ratio unlike the photo's (rotated, cropped, another photo).
     """
-    import cv2
-
     from ..imageio import read_image
+    from ..mask_size import mask_at_photo_size
 
     try:
         m = read_image(path)
@@ -143,21 +159,11 @@ def read_user_mask(path: Path, size: tuple[int, int]) -> np.ndarray:
         m = m[..., : min(3, m.shape[2])].max(axis=-1)
     if m.dtype.kind == "f":
         m = np.nan_to_num(m)
-    width, height = size
-    h, w = m.shape
-    if (w, h) != (width, height):
-        if abs(w * height - h * width) > max(w, h, width, height):  # aspect ratios differ by more than a pixel
-            raise InputError(
-                f"mask is {w}x{h} but its photo is {width}x{height} (another aspect ratio: rotated, cropped, or "
-                "the mask of another photo?)", path,
-                fix=f"save the mask at {width}x{height} (or at the original photo's size), not rotated or cropped",
-            )
-        log.info("%s: %dx%d mask resized to the photo's %dx%d", path.name, w, h, width, height)
-        m = cv2.resize(m.astype(np.float32), (width, height), interpolation=cv2.INTER_AREA)
+    m = mask_at_photo_size(m, size, path)
     top = float(m.max())
     if top <= 0:
         log.warning("%s: the mask is empty (no object pixels)", path)
-        return np.zeros((height, width), bool)
+        return np.zeros(m.shape, bool)
     # 0/1 masks (max 1) and 0/255 or 0/65535 masks alike: above half of the encoding's full scale.
     full = 1.0 if top <= 1.0 else (255.0 if top <= 255.0 else 65535.0)
     return m > full / 2
@@ -188,6 +194,18 @@ def image_folder(poses_dir: Path, cameras: CameraSet, decode_dir: Path | None) -
         return decode_dir
     raise InputError("cannot tell which decoded images the cameras belong to", poses_dir / CAMERAS_JSON,
                      fix="pass --decode results/<capture>/decode")
+
+
+def photos_without_camera(poses_dir: Path, decoded: DecodeArtifacts, names: list[str]) -> set[str]:
+    """Decoded photos that got no camera (the poses stage lets SfM drop a few): those in the decoded folder and
+    those the poses stage's report lists (its ``undistorted/`` folder holds only the posed photos)."""
+    from ..artifacts import read_json
+    from .poses import REPORT_JSON as POSES_REPORT
+
+    photos = set(decoded.names)
+    if (poses_dir / POSES_REPORT).is_file():
+        photos |= set(read_json(poses_dir / POSES_REPORT).get("not_registered", []))
+    return photos - set(names)
 
 
 def load_view(decoded: DecodeArtifacts, cam: Any, scale: float) -> View:
@@ -259,7 +277,8 @@ def run_masks(
     elif user_dir is not None and config.user_masks == "ignore":
         log.warning("--user-masks given but masks.user_masks=ignore: the user masks are not used")
         user_dir = None
-    user_files = find_user_masks(Path(user_dir), names) if user_dir is not None else {}
+    user_files = {} if user_dir is None else \
+        find_user_masks(Path(user_dir), names, photos_without_camera(poses_dir, decoded, names))
     # a user draws on the photos; training reads the poses stage's undistorted images when it made them
     undistortion = recorded_undistortion(decoded) if user_files else None
     if user_dir is not None:
@@ -272,14 +291,16 @@ def run_masks(
     warnings: list[str] = []
     with progress() as bar:
         load = bar.add_task("load views", total=len(names))
-        views, fixed = [], {}
+        views, fixed, areas = [], {}, {}
         for i, cam in enumerate(cameras.cameras):  # one full-size photo in memory at a time
             view = load_view(decoded, cam, scale)
             views.append(view)
             if cam.name in user_files:
                 m = user_mask(user_files[cam.name], cam, undistortion)
+                areas[cam.name] = np.count_nonzero(m) / m.size
                 fixed[i] = _reduce(m, view.shape)
             bar.advance(load)
+        _refuse_empty(areas, user_files, config)
         if len(fixed) == len(views):
             log.info("every view has a user mask: the automatic method is skipped")
             final, plane, rounds = [fixed[i] for i in range(len(views))], None, []
@@ -347,8 +368,8 @@ def run_masks(
         from ..cameras import save_cameras
 
         save_cameras(tmp / CAMERAS_JSON, tight)
-        report = _report(records, agreement, centre, radius, config, plane, rounds, warnings, scale, user_dir,
-                         time.time() - started)
+        report = _report(records, agreement, (centre, radius, sphere is not None), config, plane, rounds, warnings,
+                         scale, user_dir, time.time() - started)
         write_json(tmp / REPORT_JSON, report)
         inputs: dict[str, Path] = {"cameras.json": poses_dir / CAMERAS_JSON, "decode.json": decoded.folder /
                                    "decode.json"}
@@ -388,6 +409,31 @@ def _reduce(mask: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     if mask.shape == shape:
         return mask
     return cv2.resize(mask.astype(np.float32), (shape[1], shape[0]), interpolation=cv2.INTER_AREA) > 0.5
+
+
+def _refuse_empty(areas: dict[str, float], files: dict[str, Path], config: MasksConfig) -> None:
+    """Stop on user masks with (almost) no object, naming the files: one empty view carves the object out of the
+    visual hull (the object sphere then falls back to the poses stage's loose one), and a set of empty masks has
+    no object at all. ``areas``: each user-masked view's object fraction of its image.
+
+    Raises:
+        InputError: every user mask is empty; some cover less than ``config.user_mask_min_fraction``.
+    """
+    def listing(views: list[str]) -> str:
+        return ", ".join(files[n].name for n in views[:10]) + (" ..." if len(views) > 10 else "")
+
+    folder = next(iter(files.values())).parent if files else None
+    if areas and not any(areas.values()):
+        raise InputError(f"every user mask is empty (no object pixel): {listing(list(areas))}", folder,
+                         fix="draw the object white (non-zero) on black, or remove the folder for automatic masks")
+    small = [n for n, a in areas.items() if a < config.user_mask_min_fraction]
+    if small:
+        raise InputError(
+            f"{len(small)} user mask(s) empty or nearly (object under {config.user_mask_min_fraction:g} of the image): "
+            f"{listing(small)}", folder,
+            fix="draw the object white on them, or delete those files (their views then get automatic masks); if "
+            "the object is really out of those photos, set masks.user_mask_min_fraction=0",
+        )
 
 
 def _check(names: list[str], masks: list[np.ndarray], agreement: list[float], views: list[View], radius: float,
@@ -508,9 +554,11 @@ def _renormalized(cameras: CameraSet, centre: np.ndarray, radius: float, poses_d
     return cameras.model_copy(update={"cameras": cams, "frame": frame})
 
 
-def _report(records: list[dict[str, Any]], agreement: list[float], centre: np.ndarray, radius: float,
+def _report(records: list[dict[str, Any]], agreement: list[float], sphere: tuple[np.ndarray, float, bool],
             config: MasksConfig, plane: Plane | None, rounds: list[dict[str, float]], warnings: list[str],
             scale: float, user_dir: Path | None, seconds: float) -> dict[str, Any]:
+    """``sphere``: centre, radius, and whether they are the hull's (else the poses stage's unit sphere)."""
+    centre, radius, from_hull = sphere
     worst = int(np.argmin(agreement))
     return {
         "schema": SCHEMA_VERSION,
@@ -527,7 +575,9 @@ def _report(records: list[dict[str, Any]], agreement: list[float], centre: np.nd
         "object_sphere": {
             "frame": "poses (results/<capture>/poses/cameras.json)",
             "centre": np.asarray(centre).tolist(), "radius": float(radius), "margin": config.sphere_margin,
-            "from": "bounding sphere of the visual hull of the masks (pipeline.object_frame.sphere_from_masks)",
+            "from": "bounding sphere of the visual hull of the masks (pipeline.object_frame.sphere_from_masks)"
+            if from_hull else "the poses stage's sphere, kept: the masks' visual hull is empty (see warnings)",
+            "fallback": not from_hull,
             "cameras_json": "re-normalized: this sphere is the unit sphere" if config.renormalize else
             "the poses frame",
         },

@@ -62,6 +62,7 @@ def load_image_set(decode_dir: Path, cameras_path: Path, masks_dir: Path, points
     from orca.data import ImageSet
 
     from ..imageio import read_image
+    from ..mask_size import mask_at_photo_size
     from ..results import load_decode
 
     decoded = load_decode(decode_dir)
@@ -91,11 +92,8 @@ def load_image_set(decode_dir: Path, cameras_path: Path, masks_dir: Path, points
             raise InputError(f"no mask for image {name}", mask_path, "run the masks stage, or add the missing mask")
         m = read_image(mask_path)
         m = m[..., 0] if m.ndim == 3 else m
-        if m.shape != (h, w):
-            import cv2
-
-            m = cv2.resize(m, (w, h), interpolation=cv2.INTER_AREA)
         thresh = np.iinfo(m.dtype).max / 2 if m.dtype.kind == "u" else 0.5
+        m = mask_at_photo_size(m, (w, h), mask_path)
         K = cam.K.copy()
         K[0] *= sx
         K[1] *= sy
