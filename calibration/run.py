@@ -90,13 +90,13 @@ def run_calibration(
     """Calibrate one camera from photos of ``board`` in ``images_dir``; write ``out_dir`` (see the module doc)."""
     import cv2
 
-    from pipeline.artifacts import atomic_dir, write_json, write_manifest
+    from pipeline.artifacts import atomic_dir, check_output_dir, write_json, write_manifest
 
     options = options or CalibrateOptions()
     started = time.time()
     images_dir, out_dir = Path(images_dir), Path(out_dir)
     files = find_images(images_dir)
-    _check_out_dir(out_dir, images_dir)
+    check_output_dir(out_dir, "calibrate", [images_dir])
     log.info("calibrate: %d photos in %s; board: %s", len(files), images_dir, board.describe())
 
     detector = Detector(board, min_corners=options.min_corners, max_detect_side=options.max_detect_side)
@@ -146,7 +146,7 @@ def run_calibration(
         options=options.model_dump(mode="json"),
     )
 
-    with atomic_dir(out_dir) as tmp:
+    with atomic_dir(out_dir, "calibrate", [images_dir]) as tmp:
         write_json(tmp / CALIBRATION_JSON, doc)
         from .figures import summary_figure
 
@@ -177,25 +177,6 @@ def run_calibration(
         log.warning("reprojection error %.2f px RMS is high: blurred photos, a board that is not flat, or wrong "
                     "board parameters? See %s", solution.rms_px, out_dir / SUMMARY_PNG)
     return calibration
-
-
-def _check_out_dir(out_dir: Path, images_dir: Path) -> None:
-    """The output folder is replaced whole, so it must not hold the photos or anything else of value."""
-    out, imgs = out_dir.resolve(), images_dir.resolve()
-    if out == imgs or out in imgs.parents:
-        raise InputError(
-            f"the output folder {out_dir} holds the photos, and writing it would replace them",
-            out_dir,
-            fix="keep the board photos outside the output folder, e.g. captures/NAME/calibration_photos/ -> "
-            "--out captures/NAME/calibration",
-        )
-    earlier_result = (out_dir / CALIBRATION_JSON).is_file()
-    if out_dir.exists() and (not out_dir.is_dir() or (any(out_dir.iterdir()) and not earlier_result)):
-        raise InputError(
-            "exists and is not an earlier calibration result; refusing to replace it",
-            out_dir,
-            fix="choose an empty or new folder for --out",
-        )
 
 
 def _common_size(sizes: dict[str, tuple[int, int]], images_dir: Path) -> tuple[int, int]:

@@ -9,17 +9,24 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import logging
 import os
 import platform
+import re
 import shutil
+import socket
 import tempfile
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+from .errors import InputError
+
 MANIFEST = "manifest.json"
+
+log = logging.getLogger("orca")
 
 
 def _umask() -> int:
@@ -56,18 +63,111 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         tmp.unlink(missing_ok=True)
 
 
-@contextlib.contextmanager
-def atomic_dir(path: str | Path) -> Iterator[Path]:
-    """Yield a temporary folder beside ``path``; on success it replaces ``path`` whole, on error it is removed.
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's live process
+        return True
+    return True
 
-    An existing ``path`` survives a failed run untouched.
+
+_HOST = socket.gethostname().split(".")[0].replace("-", "_") or "host"
+
+
+def _temporary_prefix(name: str) -> str:
+    """``.<name>.<host>-<pid>.``: whoever finds the folder later can tell whether its writer still runs."""
+    return f".{name}.{_HOST}-{os.getpid()}."
+
+
+def remove_stale_temporaries(path: str | Path) -> list[Path]:
+    """Remove the temporary siblings (``.<name>.*.partial``, ``.<name>.old-*``) that an earlier run writing
+    ``path`` left behind when it was killed (SIGKILL, power loss). Those of a writer still running on this
+    machine are kept, and so are those of other machines (a shared file system): their writers cannot be checked.
+
+    Returns:
+        the folders removed.
     """
     path = Path(path)
+    if not path.parent.is_dir():
+        return []
+    removed = []
+    pattern = re.compile(rf"^\.{re.escape(path.name)}\.(?:(?P<host>\w+)-(?P<pid>\d+)\..*\.partial|.*\.partial|"
+                         rf"old-(?P<old>\d+))$")
+    for entry in path.parent.iterdir():
+        m = pattern.match(entry.name)
+        if not m or not entry.is_dir():
+            continue
+        pid = m["pid"] or m["old"]
+        if m["host"] not in (None, _HOST) or (pid is not None and _alive(int(pid))):
+            continue
+        shutil.rmtree(entry, ignore_errors=True)
+        removed.append(entry)
+    if removed:
+        log.info("removed %d temporary folder(s) an interrupted run left beside %s: %s", len(removed), path,
+                 ", ".join(p.name for p in removed))
+    return removed
+
+
+def check_output_dir(path: str | Path, stage: str, inputs: Iterable[str | Path] = (), *,
+                     manifest: str = MANIFEST) -> Path:
+    """Refuse an output folder that a stage may not replace: it replaces ``path`` whole, so ``path`` must be
+    absent, empty, or a folder this same stage wrote (its ``manifest`` names ``stage``), and it may not be,
+    hold, or lie inside any of the stage's ``inputs``.
+
+    Raises:
+        InputError: naming the folder and the fix; nothing is touched.
+    """
+    path = Path(path)
+    out = path.resolve()
+    for parent in out.parents:
+        if parent.exists() and not parent.is_dir():
+            raise InputError(f"{parent} is a file, so no folder can be made inside it", path,
+                             "choose an output folder whose parent folders are folders")
+    for given in inputs:
+        source = Path(given).resolve()
+        if out == source or out in source.parents or source in out.parents:
+            where = ("is" if out == source else "holds" if out in source.parents else "lies inside")
+            raise InputError(f"the output folder {where} the {stage} stage's input {given}: writing it would "
+                             "replace that input", path, "choose an output folder apart from the inputs, e.g. "
+                             f"results/<capture>/{stage}")
+    if not path.exists():
+        return path
+    if not path.is_dir():
+        raise InputError(f"exists and is a file, not a {stage} stage folder; refusing to replace it", path,
+                         "choose another output folder, or move the file away")
+    if any(path.iterdir()) and _stage_of(path / manifest) != stage:
+        raise InputError(f"holds files the {stage} stage did not write (no {manifest} of a {stage} run in it); "
+                         "refusing to replace them", path,
+                         "choose a new or empty output folder, or move those files away")
+    return path
+
+
+def _stage_of(manifest: Path) -> str | None:
+    try:
+        return read_json(manifest).get("stage")
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+@contextlib.contextmanager
+def atomic_dir(path: str | Path, stage: str, inputs: Iterable[str | Path] = (), *,
+               manifest: str = MANIFEST) -> Iterator[Path]:
+    """Yield a temporary folder beside ``path``; on success it replaces ``path`` whole, on error it is removed.
+
+    ``path`` must pass :func:`check_output_dir` (absent, empty, or this ``stage``'s earlier result, apart from its
+    ``inputs``); an existing ``path`` survives a failed run untouched. Temporary folders that killed runs left
+    beside ``path`` are removed first.
+    """
+    path = check_output_dir(path, stage, inputs, manifest=manifest)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent))
+    remove_stale_temporaries(path)
+    tmp = Path(tempfile.mkdtemp(prefix=_temporary_prefix(path.name), suffix=".partial", dir=path.parent))
     _as_if_created(tmp, 0o777)
     try:
         yield tmp
+        check_output_dir(path, stage, manifest=manifest)  # nothing else has moved in meanwhile
         if path.exists():
             old = path.with_name(f".{path.name}.old-{os.getpid()}")
             os.replace(path, old)

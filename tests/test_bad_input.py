@@ -5,7 +5,169 @@ in the test and small: seconds each, but for the few marked slow.
 
 from __future__ import annotations
 
+from pathlib import Path
+
+import pytest
+
+# A few steps of a very small model: what is tested is the bookkeeping, not the quality.
+TINY_TRAIN = [
+    "train.iterations=6", "train.batch_rays=64", "train.mask_warmup=2", "train.checkpoint_every=2",
+    "train.preview_every=6", "train.preview_downscale=4", "train.log_every=1", "train.n_coarse=8",
+    "train.n_fine=4", "train.env_samples=6", "train.grid_levels=4", "train.grid_log2_table=10",
+    "train.env_grid_log2_table=10", "train.sdf_hidden=16", "train.env_hidden=16", "train.device=cpu",
+]
+
 # ---------------------------------------------------------------- data loss: --out, superseded checkpoints
+
+
+def _orca(*args) -> int:
+    """``orca ARGS`` in this process: its exit status; its log reaches pytest's caplog (not the terminal's)."""
+    from unittest import mock
+
+    from pipeline import cli
+
+    with mock.patch.object(cli, "setup_logging", lambda verbose=False: None):
+        return cli.main([str(a) for a in args])
+
+
+def _capture_copy(tiny_capture, folder):
+    """The tiny capture's photos (and ground truth) in a folder of the test's own."""
+    import shutil
+
+    return Path(shutil.copytree(tiny_capture, folder))
+
+
+def _tree(folder) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(Path(folder).rglob("*")) if p.is_file()}
+
+
+@pytest.mark.parametrize("where", ["capture", "parent"])
+def test_decode_never_replaces_its_capture(tiny_capture, tmp_path, where):
+    """Item 1: `orca decode caps/s --out caps/s` (or --out the capture's parent) deleted the photos."""
+    capture = _capture_copy(tiny_capture, tmp_path / "caps" / "s")
+    before = _tree(tmp_path / "caps")
+    out = capture if where == "capture" else capture.parent
+    assert _orca("decode", capture, "--out", out) == 2
+    assert _tree(tmp_path / "caps") == before
+
+
+def test_a_stage_replaces_only_a_folder_it_wrote(tiny_capture, tiny_decode, tmp_path, caplog):
+    """Item 1: --out of another stage's folder, of a user's folder, of a file: refused with the folder named;
+    a folder the same stage wrote is replaced, an empty one is used."""
+    from tiny_model import orbit_cameras, write_untrained_train_dir
+
+    from pipeline.cameras import save_cameras
+
+    gt = tiny_capture / "ground_truth"
+    decode_before = _tree(tiny_decode)
+    assert _orca("train", "--decode", tiny_decode, "--ground-truth", gt, "--out", tiny_decode) == 2
+    assert _tree(tiny_decode) == decode_before
+    results = tmp_path / "results"
+    assert _orca("decode", tiny_capture, "--out", results / "decode") == 0
+    assert _orca("train", "--decode", results / "decode", "--ground-truth", gt, "--out", results / "decode") == 2
+    assert "the output folder is the train stage's input" in caplog.text
+
+    train = write_untrained_train_dir(tmp_path / "train")
+    cameras = tmp_path / "cams.json"
+    save_cameras(cameras, orbit_cameras(1, 8, 6))
+    user = tmp_path / "user"
+    user.mkdir()
+    (user / "thesis.txt").write_text("years of work")
+    a_file = tmp_path / "notes.txt"
+    a_file.write_text("notes")
+    caplog.clear()
+    assert _orca("render", train, "--cameras", cameras, "--out", user) == 2
+    assert "did not write" in caplog.text and str(user) in caplog.text
+    assert _orca("render", train, "--cameras", cameras, "--out", a_file) == 2
+    assert _orca("render", train, "--cameras", cameras, "--out", a_file / "views") == 2
+    assert (user / "thesis.txt").read_text() == "years of work" and a_file.read_text() == "notes"
+    assert _orca("render", train, "--cameras", cameras, "--out", results / "decode") == 2, "another stage's folder"
+    assert (results / "decode" / "decode.json").is_file()
+
+    (tmp_path / "empty").mkdir()
+    assert _orca("render", train, "--cameras", cameras, "--out", tmp_path / "empty") == 0
+    (tmp_path / "empty" / "old.txt").write_text("an earlier render's leftover")  # its own folder: replaced
+    assert _orca("render", train, "--cameras", cameras, "--out", tmp_path / "empty") == 0
+    assert not (tmp_path / "empty" / "old.txt").exists()
+
+
+def test_every_superseded_checkpoint_set_is_kept(tiny_capture, tiny_decode, tmp_path):
+    """Item 2: a second config change deleted the first set of superseded checkpoints."""
+    from pipeline.config import load_config
+    from pipeline.stages.train import checkpoint_dir_for, run_train
+
+    gt = tiny_capture / "ground_truth"
+    out = tmp_path / "train"
+    for hidden in (16, 24, 32):
+        cfg = load_config(preset="fast", overrides=[*TINY_TRAIN, f"train.sdf_hidden={hidden}"]).train
+        run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, cfg, max_steps=1)
+    kept = sorted((tmp_path / "train.checkpoints.superseded").iterdir())
+    assert len(kept) == 2 and all(list(k.glob("step_*.pt")) for k in kept)
+    assert list(checkpoint_dir_for(out).glob("step_*.pt"))
+
+
+def test_shorter_iterations_go_on_from_an_earlier_checkpoint(tiny_capture, tiny_decode, tmp_path, caplog):
+    """Item 9: train.iterations below the newest checkpoint's step wrote the longer model ("step 30 of 20")."""
+    from pipeline.config import load_config
+    from pipeline.errors import InputError
+    from pipeline.stages.train import checkpoint_dir_for, load_checkpoint, run_train
+
+    gt = tiny_capture / "ground_truth"
+    out = tmp_path / "train"
+
+    def train(iterations, **kw):
+        cfg = load_config(preset="fast", overrides=[*TINY_TRAIN, f"train.iterations={iterations}",
+                                                    "train.checkpoint_every=2"]).train
+        return run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, cfg, **kw)
+
+    assert train(6, max_steps=4) is None  # checkpoints at steps 2 and 4
+    result = train(3)
+    assert result is not None and result.iterations == 3
+    assert load_checkpoint(out / "model.pt")["step"] == 3
+    assert "going on from step_0000002.pt" in caplog.text
+    assert (checkpoint_dir_for(out) / "step_0000004.pt").is_file(), "the newer checkpoint is kept"
+    for step in (2, 3):
+        (checkpoint_dir_for(out) / f"step_{step:07d}.pt").unlink()
+    with pytest.raises(InputError, match="past train.iterations=3"):
+        train(3)
+
+
+def test_restart_deletes_only_a_checkpoint_folder(tiny_capture, tiny_decode, tmp_path):
+    """--restart deleted the checkpoint folder whole, whatever else a user had put in it."""
+    from pipeline.config import load_config
+    from pipeline.errors import InputError
+    from pipeline.stages.train import checkpoint_dir_for, run_train
+
+    gt = tiny_capture / "ground_truth"
+    out = tmp_path / "train"
+    cfg = load_config(preset="fast", overrides=TINY_TRAIN).train
+    run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, cfg, max_steps=1)
+    (checkpoint_dir_for(out) / "my_notes.txt").write_text("keep me")
+    with pytest.raises(InputError, match="my_notes.txt"):
+        run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, cfg, restart=True, max_steps=1)
+    assert (checkpoint_dir_for(out) / "my_notes.txt").is_file()
+
+
+
+def test_a_stage_removes_the_temporary_folders_killed_runs_left(tiny_capture, tmp_path):
+    """Item 4: `.<stage>.*.partial` folders left by SIGKILL were never cleaned. Those of a live writer stay."""
+    import os
+    import socket
+
+    results = tmp_path / "results"
+    results.mkdir()
+    host = socket.gethostname().split(".")[0].replace("-", "_")
+    dead = results / f".decode.{host}-{2**22 + 12345}.x1y2.partial"  # above any pid_max: no such process
+    legacy = results / ".decode.ab12cd34.partial"  # the naming of earlier versions (no writer recorded)
+    live = results / f".decode.{host}-{os.getpid()}.q9.partial"
+    other = results / ".masks.zz99.partial"  # another stage's: not decode's to judge
+    for folder in (dead, legacy, live, other):
+        folder.mkdir()
+        (folder / "linear").mkdir()
+    assert _orca("decode", tiny_capture, "--out", results / "decode") == 0
+    assert not dead.exists() and not legacy.exists()
+    assert live.is_dir() and other.is_dir()
+
 
 # ---------------------------------------------------------------- signals: SIGTERM, stale temporary folders
 

@@ -243,11 +243,11 @@ def test_mixed_sizes_and_unsafe_output_folders_are_refused(rendered, tmp_path):
     with pytest.raises(InputError, match=r"different sizes: 10 are 640x480 .*portrait\.png \(480x640\)"):
         run_calibration(mixed, tmp_path / "cal", BOARD)
     # The output folder is replaced whole: never the photos' folder, nor a folder that is not a result.
-    with pytest.raises(InputError, match="holds the photos"):
+    with pytest.raises(InputError, match="output folder holds the calibrate stage's input"):
         run_calibration(mixed, tmp_path, BOARD)
     (tmp_path / "notes").mkdir()
     (tmp_path / "notes" / "todo.txt").write_text("keep me")
-    with pytest.raises(InputError, match="not an earlier calibration result"):
+    with pytest.raises(InputError, match="holds files the calibrate stage did not write"):
         run_calibration(photos, tmp_path / "notes", BOARD)
     assert (tmp_path / "notes" / "todo.txt").read_text() == "keep me"
 

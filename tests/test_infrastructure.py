@@ -94,10 +94,11 @@ def test_cameras_reject_non_rigid_pose_and_name_the_file(tmp_path):
 
 def test_atomic_dir_failure_leaves_previous_artifact_untouched(tmp_path):
     out = tmp_path / "decode"
-    with atomic_dir(out) as tmp:
+    with atomic_dir(out, "decode") as tmp:
         (tmp / "a.txt").write_text("first")
+        write_manifest(tmp, stage="decode")
     with pytest.raises(RuntimeError):
-        with atomic_dir(out) as tmp:
+        with atomic_dir(out, "decode") as tmp:
             (tmp / "a.txt").write_text("half")
             raise RuntimeError("interrupted")
     assert (out / "a.txt").read_text() == "first"
@@ -106,9 +107,10 @@ def test_atomic_dir_failure_leaves_previous_artifact_untouched(tmp_path):
 
 def test_atomic_dir_replaces_whole_folder(tmp_path):
     out = tmp_path / "stage"
-    with atomic_dir(out) as tmp:
+    with atomic_dir(out, "stage") as tmp:
         (tmp / "old.txt").write_text("x")
-    with atomic_dir(out) as tmp:
+        write_manifest(tmp, stage="stage")
+    with atomic_dir(out, "stage") as tmp:
         (tmp / "new.txt").write_text("y")
     assert sorted(p.name for p in out.iterdir()) == ["new.txt"]
 
@@ -117,7 +119,7 @@ def test_atomic_artifacts_get_the_modes_of_plain_files_and_folders(tmp_path):
     """tempfile's private 0600/0700 must not leak into the artifacts (other users read the results)."""
     old = os.umask(0o022)
     try:
-        with atomic_dir(tmp_path / "stage") as tmp:
+        with atomic_dir(tmp_path / "stage", "stage") as tmp:
             (tmp / "a.txt").write_text("x")
         write_json(tmp_path / "stage" / "b.json", {"k": 1})
     finally:

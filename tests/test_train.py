@@ -99,12 +99,14 @@ def test_checkpoints_of_another_config_or_other_data_are_set_aside_not_resumed(t
     run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, _cfg("train.log_every=2",
               "train.env_depth_quantile=0.4"), max_steps=2)
     assert _steps(ckpts) == [1, 2, 4] and not aside.exists()
-    # another network, or another loss weight: the old run is kept aside, the new one starts from zero
-    for change, last_aside in (("train.sdf_hidden=32", "step_0000004.pt"),
-                               ("train.losses.eikonal=0.2", "step_0000002.pt")):
+    # another network, or another loss weight: the old run is kept aside (every earlier set too), the new one
+    # starts from zero
+    for change, last_aside in (("train.sdf_hidden=32", ["step_0000004.pt"]),
+                               ("train.losses.eikonal=0.2", ["step_0000004.pt", "step_0000002.pt"])):
         run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, _cfg(change), max_steps=2)
         assert _steps(ckpts) == [1, 2], change
-        assert sorted(p.name for p in aside.glob("step_*.pt"))[-1] == last_aside, change
+        kept = sorted(aside.iterdir())
+        assert [sorted(p.name for p in k.glob("step_*.pt"))[-1] for k in kept] == last_aside, change
     # the same config on other masks (one view's mask edited) starts over too
     masks = tmp_path / "masks"
     shutil.copytree(gt / "masks", masks)
@@ -159,8 +161,9 @@ def test_nan_in_training_stops_with_a_clear_message(tiny_capture, tiny_decode, t
 
 def test_missing_masks_are_named(tiny_capture, tiny_decode, tmp_path):
     gt = tiny_capture / "ground_truth"
+    (tmp_path / "masks").mkdir()
     with pytest.raises(InputError, match="no mask"):
-        run_train(tiny_decode, gt / "cameras.json", tmp_path, tmp_path / "train", _cfg())
+        run_train(tiny_decode, gt / "cameras.json", tmp_path / "masks", tmp_path / "train", _cfg())
 
 
 def test_training_lowers_the_loss_on_the_tiny_capture(tiny_capture, tiny_decode, tmp_path):

@@ -167,7 +167,7 @@ def run_decode(capture_dir: Path, out_dir: Path, config: DecodeConfig) -> Decode
         except InputError as e:
             bad.append(e)
     if bad:
-        names = "\n".join(f"  - {e}" for e in bad)
+        names = "\n".join(f"  - {e.path.name}: {e.message}" for e in bad)  # their fixes: the one below
         raise InputError(
             f"{len(bad)} of {len(files)} photos cannot be read:\n{names}",
             photo_dir,
@@ -193,7 +193,7 @@ def run_decode(capture_dir: Path, out_dir: Path, config: DecodeConfig) -> Decode
     k = config.downscale
     records: list[dict[str, Any]] = []
     images: list[DecodedImage] = []
-    with atomic_dir(out_dir) as tmp:
+    with atomic_dir(out_dir, "decode", [capture_dir]) as tmp:
         for sub in ("linear", "srgb", "clipped"):
             (tmp / sub).mkdir()
         with progress() as bar:

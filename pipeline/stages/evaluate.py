@@ -1028,7 +1028,7 @@ def run_evaluate(
     }
     if poses is not None:
         results["poses"] = poses
-    with atomic_dir(out_dir) as tmp:
+    with atomic_dir(out_dir, "evaluate", [train_dir, gt.folder, *(p for p in (cameras, mesh) if p)]) as tmp:
         if mesh is not None:
             results["mesh"] = evaluate_mesh(Path(mesh), gt, align)
         if object:

@@ -387,7 +387,7 @@ def run_export(train_dir: Path, out_dir: Path, cfg: ExportConfig | None = None, 
              train_dir, len(env_cams), pano_w, pano_h, cfg.video_frames, cfg.video_width, cfg.video_height,
              len(object_cams))
 
-    with atomic_dir(out_dir) as tmp, progress() as bar:
+    with atomic_dir(out_dir, "export", [train_dir, *([cameras] if cameras else [])]) as tmp, progress() as bar:
         # panorama first: its depth sets the colour scale of every depth picture
         t = time.time()
         task = bar.add_task("panorama", total=pano_w * pano_h)

@@ -256,7 +256,7 @@ def run_masks(
     user_masks_dir: Path | None = None,
 ) -> MasksResult:
     """Object masks for every posed photo into ``out_dir`` (see the module doc)."""
-    from ..artifacts import atomic_dir, write_json, write_manifest
+    from ..artifacts import atomic_dir, check_output_dir, write_json, write_manifest
     from ..cameras import load_cameras
     from ..log import progress
     from ..object_frame import sphere_from_masks
@@ -266,6 +266,8 @@ def run_masks(
 
     started = time.time()
     poses_dir, out_dir = Path(poses_dir), Path(out_dir)
+    sources = [p for p in (capture_dir, poses_dir, decode_dir, user_masks_dir) if p is not None]
+    check_output_dir(out_dir, "masks", sources)  # before minutes of segmentation, not after
     cameras = load_cameras(poses_dir / CAMERAS_JSON)
     names = [c.name for c in cameras.cameras]
     if len(names) < 2:
@@ -335,7 +337,7 @@ def run_masks(
     for w in warnings:
         log.warning("%s", w)
 
-    with atomic_dir(out_dir) as tmp:
+    with atomic_dir(out_dir, "masks", sources) as tmp:
         (tmp / MASKS).mkdir()
         (tmp / OVERLAYS).mkdir()
         records, tiles = [], []

@@ -37,8 +37,8 @@ from typing import Any
 
 import numpy as np
 
-from ..artifacts import atomic_dir, read_json, write_json, write_manifest
-from ..config import MeshConfig, add_config_arguments, config_from_arguments
+from ..artifacts import atomic_dir, check_output_dir, read_json, write_json, write_manifest
+from ..config import MeshConfig, add_config_arguments, config_from_arguments, with_values
 from ..errors import InputError
 
 log = logging.getLogger("orca.mesh")
@@ -354,6 +354,8 @@ def run_mesh(train_dir: Path, out_dir: Path, cfg: MeshConfig | None = None, *, c
     started = time.time()
     cfg = cfg if cfg is not None else MeshConfig()
     train_dir, out_dir = Path(train_dir), Path(out_dir)
+    sources = [train_dir, *([cameras] if cameras else [])]
+    check_output_dir(out_dir, "mesh", sources)
     weights = train_dir / FINAL_WEIGHTS
     if not weights.is_file():
         raise InputError("no trained model here", weights, "run `orca train` first (it writes model.pt when done)")
@@ -380,7 +382,7 @@ def run_mesh(train_dir: Path, out_dir: Path, cfg: MeshConfig | None = None, *, c
     }
     import open3d as o3d
 
-    with atomic_dir(out_dir) as tmp:
+    with atomic_dir(out_dir, "mesh", sources) as tmp:
         o3d.io.write_triangle_mesh(str(tmp / MESH_PLY), mesh, write_ascii=False)
         to_colmap = camera_set.frame.to_colmap if camera_set is not None else None
         if to_colmap is not None:
@@ -427,7 +429,7 @@ def register(subparsers: Any) -> None:
 def main(args: argparse.Namespace) -> dict[str, Any]:
     cfg = config_from_arguments(args, "mesh").mesh
     if args.resolution is not None:
-        cfg = MeshConfig.model_validate({**cfg.model_dump(), "resolution": args.resolution})
+        cfg = with_values(cfg, f"--resolution {args.resolution}", resolution=args.resolution)
     train = Path(args.train)
     out = args.out if args.out is not None else train.parent / "mesh"
     return run_mesh(train, out, cfg, cameras=args.cameras, device=args.device)

@@ -61,7 +61,7 @@ from ..errors import InputError
 from .masks import read_user_mask
 
 if TYPE_CHECKING:
-    import pycolmap
+    import pycolmap  # noqa: TID251 - annotations only
 
     from ..object_frame import ObjectSphere
     from ..results import DecodeArtifacts
@@ -136,7 +136,8 @@ def run_poses(
     if (capture_dir / "capture.yaml").is_file():
         inputs["capture.yaml"] = capture_dir / "capture.yaml"
 
-    with _collect_warnings() as warnings, atomic_dir(out_dir) as tmp:
+    sources = [p for p in (capture_dir, decode_dir, masks_dir) if p is not None]
+    with _collect_warnings() as warnings, atomic_dir(out_dir, "poses", sources) as tmp:
         if known_file is not None:
             log.info("known cameras: %s (SfM skipped)", known_file)
             posed = _posed_from_file(known_file, names, width, height)
@@ -356,9 +357,10 @@ def _posed_from_sfm(decoded: DecodeArtifacts, names: list[str], calibration: tup
 
 def _posed_from_file(path: Path, names: list[str], width: int, height: int) -> Posed:
     """Known cameras matched to the decoded photos by name, intrinsics scaled to the decoded size."""
-    import pycolmap
-
+    from ..signals import import_pycolmap
     from ..transforms import load_transforms
+
+    pycolmap = import_pycolmap()
 
     if path.name == TRANSFORMS_JSON:
         known = load_transforms(path)
@@ -496,8 +498,9 @@ def recorded_undistortion(decoded: DecodeArtifacts) -> UndistortMaps | None:
     """The undistortion the poses stage applied to an ``undistorted/`` folder (rebuilt from the lenses its
     ``decode.json`` records), so that images made for the original photos (a user's masks) follow it; None
     for a folder of photos as decoded."""
-    import pycolmap
+    from ..signals import import_pycolmap
 
+    pycolmap = import_pycolmap()
     record = decoded.meta.get("undistorted")
     if record is None:
         return None

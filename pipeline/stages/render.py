@@ -169,7 +169,7 @@ def run_render(
                          "pass a smaller --downscale")
     model = load_renderer(train_dir, device)
     render = render_environment_view if environment else render_object_view
-    with atomic_dir(out_dir) as tmp, progress() as bar:
+    with atomic_dir(out_dir, "render", [train_dir, cameras_path]) as tmp, progress() as bar:
         task = bar.add_task("render environment" if environment else "render object", total=len(cameras))
         for cam in cameras.cameras:
             write_views(tmp, cam.name, render(model, cam, downscale))

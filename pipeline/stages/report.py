@@ -871,7 +871,7 @@ def run_report(results_dir: Path, out_dir: Path | None = None) -> dict[str, Any]
         f"<p>Results folder <code>{esc(results.resolve())}</code>, report written {esc(created)}.</p>\n"
         f"<nav>{nav}</nav>\n<h2>Stages</h2>{overview}{problems}\n" + "\n".join(parts) + "\n</body>\n</html>\n"
     )
-    with atomic_dir(out_dir) as tmp:
+    with atomic_dir(out_dir, "report", [results / s for s in STAGES]) as tmp:
         (tmp / REPORT_HTML).write_text(document, encoding="utf-8")
         write_manifest(tmp, stage="report", inputs=page.inputs, config={}, started=started,
                        extra={"results": str(results), "sections": status, "images": page.images,

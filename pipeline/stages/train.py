@@ -11,9 +11,11 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import itertools
 import json
 import logging
 import math
+import re
 import shutil
 import time
 from dataclasses import dataclass
@@ -22,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from ..artifacts import atomic_dir, atomic_path, write_json, write_manifest
+from ..artifacts import atomic_dir, atomic_path, check_output_dir, remove_stale_temporaries, write_json, write_manifest
 from ..cameras import load_cameras
 from ..config import TrainConfig, add_config_arguments, config_from_arguments
 from ..errors import InputError, OrcaError
@@ -207,8 +209,50 @@ def checkpoint_dir_for(out_dir: Path) -> Path:
     return out_dir.with_name(out_dir.name + CHECKPOINT_SUFFIX)
 
 
+# what a checkpoint folder holds: checkpoints (and atomic_path's temporary files), the live logs and previews
+_CHECKPOINT_ENTRY = re.compile(r"\.?step_\d+\.pt.*|tb|previews|metrics\.jsonl")
+
+
 def _checkpoints(folder: Path) -> list[Path]:
     return sorted(folder.glob("step_*.pt")) if folder.is_dir() else []
+
+
+def discard_checkpoints(folder: Path) -> None:
+    """Delete a checkpoint folder (``--restart``), but only one that holds nothing but what training writes."""
+    foreign = [p.name for p in folder.iterdir() if not _CHECKPOINT_ENTRY.fullmatch(p.name)]
+    if foreign:
+        raise InputError(f"--restart would delete this checkpoint folder, but it also holds {', '.join(foreign[:5])}, "
+                         "which training did not write", folder, "move those files away, then rerun")
+    shutil.rmtree(folder)
+
+
+def checkpoint_step(path: Path) -> int:
+    """The step of ``step_XXXXXXX.pt``."""
+    return int(re.fullmatch(r"step_(\d+)\.pt", path.name)[1])
+
+
+def resumable_checkpoint(checkpoints: list[Path], iterations: int) -> Path | None:
+    """The newest of ``checkpoints`` (sorted by step) at or below ``iterations``: a run shortened below its
+    newest checkpoint goes on from an earlier one (the newer ones stay).
+
+    Raises:
+        InputError: every checkpoint is past ``iterations`` (a longer model cannot be made shorter).
+    """
+    if not checkpoints:
+        return None
+    usable = [c for c in checkpoints if checkpoint_step(c) <= iterations]
+    newest = checkpoints[-1]
+    if not usable:
+        raise InputError(
+            f"every checkpoint here is past train.iterations={iterations} (the earliest is at step "
+            f"{checkpoint_step(checkpoints[0])}, the newest at {checkpoint_step(newest)}): a trained model cannot be "
+            "made shorter", newest.parent,
+            f"set train.iterations to at least {checkpoint_step(newest)} to finish from the newest checkpoint, or "
+            "pass --restart to train from scratch (the checkpoints are then deleted)")
+    if usable[-1] != newest:
+        log.warning("train.iterations=%d is below the newest checkpoint's step %d (%s, kept): going on from %s, the "
+                    "newest at or below it", iterations, checkpoint_step(newest), newest.name, usable[-1].name)
+    return usable[-1]
 
 
 def save_checkpoint(
@@ -285,11 +329,17 @@ def identity_changes(saved: dict[str, Any] | None, current: dict[str, Any]) -> l
 
 
 def supersede_checkpoints(ckpt_dir: Path, reasons: list[str]) -> Path:
-    """Move a checkpoint folder that may not be resumed aside (replacing an older one there): nothing already
-    computed is lost, and training starts over."""
-    aside = ckpt_dir.with_name(ckpt_dir.name + ".superseded")
-    if aside.exists():
-        shutil.rmtree(aside)
+    """Move a checkpoint folder that may not be resumed aside, into a dated folder of its own under
+    ``<name>.superseded/`` (every earlier set stays there too): nothing already computed is lost, and training
+    starts over."""
+    root = ckpt_dir.with_name(ckpt_dir.name + ".superseded")
+    root.mkdir(exist_ok=True)
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    aside = root / stamp
+    for n in itertools.count(2):
+        if not aside.exists():
+            break
+        aside = root / f"{stamp}-{n}"
     ckpt_dir.rename(aside)
     log.warning("not resuming from the checkpoints in %s (%s): training starts over; they are kept in %s",
                 ckpt_dir, "; ".join(reasons), aside)
@@ -352,6 +402,10 @@ def run_train(
     from orca.model import OrcaModel, objective
 
     started = time.time()
+    ckpt_dir = checkpoint_dir_for(out_dir)
+    sources = [p for p in (decode_dir, cameras_path, masks_dir, points_dir) if p is not None]
+    check_output_dir(out_dir, "train", sources)  # before hours of training, not after
+    remove_stale_temporaries(out_dir)
     device = resolve_device(cfg.device)
     torch.manual_seed(cfg.seed)
     data, names = load_image_set(decode_dir, cameras_path, masks_dir, points_dir, cfg.depth_object_margin_px)
@@ -380,9 +434,8 @@ def run_train(
     scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda it: math.exp(decay * it))
     weights = loss_weights(cfg)
 
-    ckpt_dir = checkpoint_dir_for(out_dir)
     if restart and ckpt_dir.exists():
-        shutil.rmtree(ckpt_dir)
+        discard_checkpoints(ckpt_dir)
     step = 0
     seconds_before = 0.0
     existing = _checkpoints(ckpt_dir)
@@ -392,14 +445,16 @@ def run_train(
         if changes:
             supersede_checkpoints(ckpt_dir, changes)
             existing = []
+    resume = resumable_checkpoint(existing, cfg.iterations)
     ckpt_dir.mkdir(parents=True, exist_ok=True)
-    if existing:
-        load_weights(model, state, existing[-1])
+    if resume is not None:
+        state = state if resume == existing[-1] else load_checkpoint(resume)
+        load_weights(model, state, resume)
         optimizer.load_state_dict(state["optimizer"])
         scheduler.load_state_dict(state["scheduler"])
         step = int(state["step"])
         seconds_before = float(state.get("seconds", 0.0))
-        log.info("resuming from %s (step %d of %d)", existing[-1], step, cfg.iterations)
+        log.info("resuming from %s (step %d of %d)", resume, step, cfg.iterations)
     # The sampler is reseeded from the step so a resumed run draws the batches an uninterrupted one would.
     generator = torch.Generator().manual_seed(cfg.seed * 1_000_003 + step)
     # off-object rays draw from their own stream: the object's batches do not depend on background_rays
@@ -485,7 +540,7 @@ def run_train(
         return None
 
     final_losses = {k: float(v) for k, v in terms.items()}
-    with atomic_dir(out_dir) as tmp:
+    with atomic_dir(out_dir, "train", sources) as tmp:
         torch.save({"format": CHECKPOINT_FORMAT, "step": step, "model": model.state_dict(),
                     "config": cfg.model_dump_json()}, tmp / FINAL_WEIGHTS)
         (tmp / "config.json").write_text(cfg.model_dump_json(indent=2) + "\n", encoding="utf-8")

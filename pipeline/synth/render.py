@@ -49,7 +49,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from ..artifacts import atomic_dir, write_json, write_manifest
+from ..artifacts import MANIFEST, atomic_dir, write_json, write_manifest
 from ..cameras import CameraSet, Frame, save_cameras
 from ..errors import InputError
 from ..imageio import to_srgb8, write_exr, write_png
@@ -450,7 +450,7 @@ def render_capture(scene: str | SceneSpec, out_dir: str | Path, options: SynthOp
     fx = views[0].fx
     focal_mm, focal_35 = fx / options.width * exp.sensor_width_mm, fx / options.width * 36.0
 
-    with atomic_dir(out_dir) as tmp:
+    with atomic_dir(out_dir, "synth", manifest=f"{GT}/{MANIFEST}") as tmp:
         gt = tmp / GT
         for key in ("linear", "diffuse", "specular", "albedo", "normals", "depth", "masks", "coverage"):
             (tmp / LAYOUT[key]).mkdir(parents=True)
