@@ -7,22 +7,49 @@ the top-left corner of the image, so the centre of the top-left pixel is (0.5, 0
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from .artifacts import read_json, write_json
-from .errors import InputError
+from .artifacts import write_json
+from .errors import InputError, validation_problem
+from .results import read_stage_json, rerun_fix
 
 Matrix4 = list[list[float]]
+
+
+def as_matrix4(m: Any, name: str | None = None) -> np.ndarray:
+    """``m`` (4 lists of 4 numbers) as a ``(4, 4)`` float64 array; a ValueError says what is wrong with it
+    (its shape, a value that is not a number, NaN or infinity), prefixed by ``name`` when given."""
+    prefix = f"{name}: " if name else ""
+    rows = [len(r) if isinstance(r, (list, tuple)) else None for r in m] if isinstance(m, (list, tuple)) else None
+    if rows is None or rows != [4, 4, 4, 4]:
+        raise ValueError(f"{prefix}expected a 4x4 matrix (4 rows of 4 numbers), got {_rows(m, rows)}")
+    try:
+        a = np.asarray(m, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{prefix}expected numbers, got {m!r:.80}") from e
+    bad = np.argwhere(~np.isfinite(a))
+    if len(bad):
+        r, c = bad[0]
+        raise ValueError(f"{prefix}expected finite numbers, got {a[r, c]} in row {r + 1}, column {c + 1}")
+    return a
+
+
+def _rows(m: Any, rows: list[int | None] | None) -> str:
+    if rows is None:
+        return f"{type(m).__name__} {m!r:.40}"
+    if any(n is None for n in rows):
+        return f"a list of {len(rows)} values, not of rows"
+    lengths = sorted(set(rows))
+    return f"{len(rows)} row{'s' if len(rows) != 1 else ''} of {'/'.join(map(str, lengths))} numbers"
 
 
 def _check_4x4(m: Matrix4 | None, *, rigid: bool) -> Matrix4 | None:
     if m is None:
         return None
-    a = np.asarray(m, dtype=np.float64)
-    if a.shape != (4, 4) or not np.all(np.isfinite(a)):
-        raise ValueError(f"expected a finite 4x4 matrix, got shape {a.shape}")
+    a = as_matrix4(m)
     if not np.allclose(a[3], [0, 0, 0, 1], atol=1e-9):
         raise ValueError("last row of a 4x4 transform must be [0, 0, 0, 1]")
     r = a[:3, :3]
@@ -112,14 +139,51 @@ class CameraSet(BaseModel):
 
 
 def load_cameras(path: str | Path) -> CameraSet:
-    """Read and validate a ``cameras.json``; errors name the file."""
+    """Read and validate a ``cameras.json``; errors name the file, each problem and the stage to rerun."""
     path = Path(path)
     if not path.is_file():
         raise InputError("camera file not found", path, "run the poses stage or pass an existing cameras.json")
+    doc = read_stage_json(path)
     try:
-        return CameraSet.model_validate(read_json(path))
-    except ValueError as e:
-        raise InputError(f"invalid cameras.json: {e}", path) from e
+        return CameraSet.model_validate(doc)
+    except ValidationError as e:
+        lines = camera_problems(e, doc)
+        message = f"invalid camera file: {lines[0]}" if len(lines) == 1 else "invalid camera file:\n" + "\n".join(
+            f"  {line}" for line in lines)
+        raise InputError(message, path, rerun_fix(path)) from e
+
+
+def camera_problems(error: ValidationError, doc: Any = None) -> list[str]:
+    """One line per problem of a camera file, each naming its camera. A problem many cameras share (a key the
+    file's writer never wrote) is one line saying which cameras, not one per camera."""
+    grouped: dict[tuple[str, str], list[str]] = {}
+    for item in error.errors():
+        loc = item["loc"]
+        if len(loc) > 1 and loc[0] == "cameras" and isinstance(loc[1], int):
+            key, camera = ".".join(map(str, loc[2:])) or "the entry", _camera_label(doc, loc[1])
+        else:
+            key, camera = ".".join(map(str, loc)) or "the file", ""
+        grouped.setdefault((key, validation_problem(item)), []).append(camera)
+    lines = []
+    for (key, what), cameras in grouped.items():
+        named = [c for c in cameras if c]
+        if len(named) == 1:
+            lines.append(f"camera {named[0]}: {key}: {what}")
+        elif named:
+            shown = ", ".join(named[:5]) + (", ..." if len(named) > 5 else "")
+            lines.append(f"{len(named)} cameras ({shown}): {key}: {what}")
+        else:
+            lines.append(f"{key}: {what}")
+    return lines
+
+
+def _camera_label(doc: Any, index: int) -> str:
+    """The camera's name where the file gives one, else its index in the list ([0] first)."""
+    try:
+        name = doc["cameras"][index]["name"]
+    except (KeyError, IndexError, TypeError):
+        name = None
+    return str(name) if isinstance(name, str) and name else f"[{index}]"
 
 
 def save_cameras(path: str | Path, cameras: CameraSet) -> Path:

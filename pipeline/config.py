@@ -7,19 +7,23 @@ Unknown keys and bad values are errors (pydantic ``extra="forbid"``), never sile
 from __future__ import annotations
 
 import copy
+import difflib
 import hashlib
 import json
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TypeVar
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from .errors import ConfigError
+from .errors import ConfigError, validation_problem
 
 
 class StrictModel(BaseModel):
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+
+SectionT = TypeVar("SectionT", bound=StrictModel)
 
 
 class DecodeConfig(StrictModel):
@@ -474,22 +478,40 @@ def deep_merge(base: dict[str, Any], update: dict[str, Any]) -> dict[str, Any]:
 def parse_override(item: str) -> dict[str, Any]:
     """``"decode.downscale=2"`` -> ``{"decode": {"downscale": 2}}``; the value is parsed as YAML."""
     if "=" not in item:
-        raise ConfigError(f"override {item!r} is not of the form key.sub=value")
+        raise ConfigError(f"--set {item}: not of the form key.sub=value", fix="write it as --set decode.downscale=2")
     key, value = item.split("=", 1)
-    parsed: Any = yaml.safe_load(value)
+    try:
+        parsed: Any = yaml.safe_load(value)
+    except yaml.YAMLError as e:
+        raise ConfigError(f"--set {item}: the value {value!r} is not valid YAML ({_yaml_problem(e)})",
+                          fix="write the value as YAML, e.g. --set 'decode.white_balance=[2.1, 1, 1.6]' "
+                          "(quoted for the shell)") from e
     for part in reversed(key.strip().split(".")):
         parsed = {part: parsed}
     return parsed
 
 
 def _read_yaml(path: Path) -> dict[str, Any]:
+    if not path.is_file():
+        raise ConfigError("config file not found" if not path.exists() else "not a file", path,
+                          fix="check the path given to --config (or leave the option out)")
     try:
         data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    except (OSError, UnicodeDecodeError) as e:
+        raise ConfigError(f"cannot read the config file ({e})", path, fix="save it as UTF-8 text you can read") from e
     except yaml.YAMLError as e:
-        raise ConfigError(f"{path}: not valid YAML: {e}") from e
+        raise ConfigError(f"not valid YAML: {_yaml_problem(e)}", path, fix="correct the YAML syntax there") from e
     if not isinstance(data, dict):
-        raise ConfigError(f"{path}: expected a mapping at the top level, got {type(data).__name__}")
+        raise ConfigError(f"expected a mapping at the top level, got {type(data).__name__}", path,
+                          fix="write sections of keys, e.g. `decode:` then `  downscale: 2` on the next line")
     return data
+
+
+def _yaml_problem(e: yaml.YAMLError) -> str:
+    """What the YAML parser objects to and where, without its echo of the text."""
+    problem = getattr(e, "problem", None) or " ".join(str(e).split())
+    mark = getattr(e, "problem_mark", None)
+    return f"{problem} at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else problem
 
 
 def load_config(
@@ -498,24 +520,106 @@ def load_config(
     overrides: list[str] | tuple[str, ...] = (),
 ) -> PipelineConfig:
     """Build and validate the config from a preset, YAML files (missing ``None`` entries skipped), overrides."""
-    layers = [_read_yaml(Path(f)) for f in files if f is not None]
-    layers += [parse_override(o) for o in overrides]
-    chosen = preset
-    for layer in layers:
-        chosen = layer.get("preset", chosen) if preset is None else preset
-    chosen = chosen or "standard"
-    if chosen not in PRESETS:
-        raise ConfigError(f"unknown preset {chosen!r}; choose one of {', '.join(PRESETS)}")
+    layers = [(str(f), _read_yaml(Path(f))) for f in files if f is not None]
+    layers += [(f"--set {o}", parse_override(o)) for o in overrides]
+    chosen = _preset(preset, layers)
     merged: dict[str, Any] = deep_merge({}, PRESETS[chosen])
-    for layer in layers:
+    for _, layer in layers:
         merged = deep_merge(merged, layer)
     merged["preset"] = chosen
     try:
         return PipelineConfig.model_validate(merged)
     except ValidationError as e:
-        sources = [str(f) for f in files if f is not None] + [f"--set {o}" for o in overrides]
-        where = ", ".join(sources) or f"preset {chosen!r}"
-        raise ConfigError(f"{where}: invalid configuration:\n{e}") from e
+        raise _invalid(e, layers, f"preset {chosen!r}") from e
+
+
+Layers = list[tuple[str, dict[str, Any]]]  # (where it came from: a file, "--set key=value"; its values)
+
+
+def _preset(given: str | None, layers: Layers) -> str:
+    """The preset: ``given`` (``--preset``) wins over the last layer's ``preset:``; 'standard' by default."""
+    chosen, source = given, f"--preset {given}"
+    if given is None:
+        for where, layer in layers:
+            if "preset" in layer:
+                chosen, source = layer["preset"], where
+    chosen = chosen or "standard"
+    if not isinstance(chosen, str) or chosen not in PRESETS:
+        raise ConfigError(f"{source}: unknown preset {chosen!r}{_did_you_mean(str(chosen), {p: [p] for p in PRESETS})}",
+                          fix=f"choose one of {', '.join(PRESETS)}")
+    return chosen
+
+
+def _invalid(error: ValidationError, layers: Layers, default: str) -> ConfigError:
+    """One line per problem: where the value came from (the last layer that sets it), its key, what is wrong
+    and, for an unknown key, the closest valid one."""
+    problems: dict[tuple[str, str], list[str]] = {}
+    for item in error.errors():
+        # pydantic names the member of a union a value failed (``literal['reference']``) as if it were a key
+        loc = tuple(part for part in item["loc"] if not (isinstance(part, str) and "[" in part))
+        what = validation_problem(item)
+        if item["type"] == "extra_forbidden":
+            what += _did_you_mean(str(loc[-1]), _keys_beside(loc))
+        found = problems.setdefault((_source(loc, layers) or default, ".".join(map(str, loc))), [])
+        if what not in found:
+            found.append(what)
+    lines = [f"{where}: {key}: {'; or '.join(whats)}" for (where, key), whats in problems.items()]
+    fix = "correct the values named above (every key, its default and its meaning: pipeline/config.py)"
+    if len(lines) == 1:
+        return ConfigError(f"invalid configuration: {lines[0]}", fix=fix)
+    return ConfigError("invalid configuration:\n" + "\n".join(f"  {line}" for line in lines), fix=fix)
+
+
+def _source(loc: tuple[Any, ...], layers: Layers) -> str | None:
+    """The last layer setting ``loc``, or the longest part of it that some layer sets (a model's own check
+    reports the section only)."""
+    for n in range(len(loc), 0, -1):
+        for where, layer in reversed(layers):
+            node: Any = layer
+            for part in loc[:n]:
+                if isinstance(node, dict) and part in node:
+                    node = node[part]
+                elif isinstance(node, list) and isinstance(part, int) and 0 <= part < len(node):
+                    node = node[part]
+                else:
+                    break
+            else:
+                return where
+    return None
+
+
+def _keys_beside(loc: tuple[Any, ...]) -> dict[str, list[str]]:
+    """The valid keys where ``loc``'s last key was given, each with how to write it. A key outside any section
+    may be one section's (``iteratons`` -> ``train.iterations``): those are candidates there too."""
+    model: type[BaseModel] = PipelineConfig
+    for part in loc[:-1]:
+        field = model.model_fields.get(part) if isinstance(part, str) else None
+        inner = field.annotation if field is not None else None
+        if not (isinstance(inner, type) and issubclass(inner, BaseModel)):
+            return {}
+        model = inner
+    keys = {k: [k] for k in model.model_fields}
+    if len(loc) == 1:
+        for section, field in PipelineConfig.model_fields.items():
+            if isinstance(field.annotation, type) and issubclass(field.annotation, BaseModel):
+                for k in field.annotation.model_fields:
+                    keys.setdefault(k, []).append(f"{section}.{k}")
+    return keys
+
+
+def _did_you_mean(key: str, valid: dict[str, list[str]]) -> str:
+    """'; did you mean ...?' naming the valid key closest to ``key`` (each way to write it), or ''."""
+    close = difflib.get_close_matches(key, list(valid), n=1)
+    return f"; did you mean {' or '.join(repr(k) for k in valid[close[0]])}?" if close else ""
+
+
+def with_values(section: SectionT, option: str, **values: Any) -> SectionT:
+    """A config section with ``values`` set by a stage's own CLI option (``mesh --resolution``), validated: a bad
+    value is a :class:`ConfigError` naming ``option``, like a bad ``--set``."""
+    try:
+        return type(section).model_validate({**section.model_dump(), **values})
+    except ValidationError as e:
+        raise _invalid(e, [(option, values)], option) from e
 
 
 def add_config_arguments(parser: Any) -> None:

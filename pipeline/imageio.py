@@ -6,6 +6,7 @@ Arrays are ``(H, W, C)`` float32 for EXR and ``(H, W, C)`` uint8/uint16 for PNG,
 
 from __future__ import annotations
 
+import errno
 from pathlib import Path
 
 import cv2
@@ -44,17 +45,25 @@ def write_exr(path: str | Path, image: np.ndarray, *, half: bool = False) -> Pat
 
 
 def read_exr(path: str | Path) -> np.ndarray:
-    """Read an EXR as float32: ``(H, W)`` for one channel, ``(H, W, 3|4)`` for RGB(A)."""
+    """Read an EXR as float32: ``(H, W)`` for one channel, ``(H, W, 3|4)`` for RGB(A).
+
+    A missing file is a FileNotFoundError and a damaged one a ValueError naming it, as :func:`read_image`'s
+    (OpenEXR reports both as a RuntimeError)."""
     path = Path(path)
-    with OpenEXR.File(str(path), separate_channels=True) as f:
-        channels = f.channels()
-        names = list(channels.keys())
-        if all(n in names for n in _RGB):
-            order = _RGBA if "A" in names else _RGB
-            return np.stack([channels[n].pixels.astype(np.float32) for n in order], axis=-1)
-        if len(names) == 1:
-            return channels[names[0]].pixels.astype(np.float32)
-        raise ValueError(f"{path}: unsupported EXR channels {names}")
+    if not path.is_file():
+        raise FileNotFoundError(errno.ENOENT, "no such file", str(path))
+    try:
+        with OpenEXR.File(str(path), separate_channels=True) as f:
+            channels = {n: c.pixels for n, c in f.channels().items()}
+    except (RuntimeError, ValueError) as e:  # a truncated file: ValueError
+        raise ValueError(f"{path}: not a readable EXR image ({e})") from e
+    names = list(channels)
+    if all(n in names for n in _RGB):
+        order = _RGBA if "A" in names else _RGB
+        return np.stack([channels[n].astype(np.float32) for n in order], axis=-1)
+    if len(names) == 1:
+        return channels[names[0]].astype(np.float32)
+    raise ValueError(f"{path}: unsupported EXR channels {names}")
 
 
 def write_png(path: str | Path, image: np.ndarray) -> Path:

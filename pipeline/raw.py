@@ -22,7 +22,9 @@ overflows, and rescale exactly afterwards; what still reaches 65535 is flagged a
 
 from __future__ import annotations
 
+import contextlib
 import logging
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -113,7 +115,7 @@ def read_exif(path: Path) -> ExifInfo:
     import exifread
 
     try:
-        with open(path, "rb") as f:
+        with open(path, "rb") as f, _naming_the_file(logging.getLogger("exifread"), path):
             tags = exifread.process_file(f, details=False)
     except Exception as e:  # exifread raises many things on odd files; EXIF is optional
         log.debug("%s: no EXIF (%s)", path, e)
@@ -138,6 +140,22 @@ def read_exif(path: Path) -> ExifInfo:
         orientation=orientation,
         datetime=_text(get("EXIF DateTimeOriginal", "Image DateTimeOriginal", "Image DateTime")),
     )
+
+
+@contextlib.contextmanager
+def _naming_the_file(logger: logging.Logger, path: Path) -> Iterator[None]:
+    """While reading ``path``, ``logger``'s messages name it: exifread's warnings ("File format not
+    recognized.") do not say which of a capture's photos they are about."""
+
+    def name_it(record: logging.LogRecord) -> bool:
+        record.msg, record.args = f"{path}: EXIF: {record.getMessage()}", ()
+        return True
+
+    logger.addFilter(name_it)
+    try:
+        yield
+    finally:
+        logger.removeFilter(name_it)
 
 
 # ----------------------------------------------------------------------------------------------- orientation

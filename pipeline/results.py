@@ -24,6 +24,49 @@ from .artifacts import MANIFEST, read_json
 from .errors import InputError
 from .imageio import read_exr, read_image
 
+DECODE_JSON = "decode.json"
+IMAGE_FILES = ("linear", "srgb", "clipped")  # decode.json's per-image file entries
+
+
+def read_stage_json(path: str | Path, stage: str | None = None) -> Any:
+    """A JSON file a stage wrote. Missing or damaged (an interrupted copy, an edit gone wrong), it is an
+    :class:`InputError` naming the file and the stage to rerun (:func:`rerun_fix`), not a traceback."""
+    path = Path(path)
+    try:
+        return read_json(path)
+    except FileNotFoundError as e:
+        raise InputError("file not found", path, rerun_fix(path, stage)) from e
+    except (OSError, ValueError) as e:  # JSONDecodeError and UnicodeDecodeError are ValueErrors
+        raise InputError(f"not valid JSON ({e})", path, rerun_fix(path, stage)) from e
+
+
+def rerun_fix(path: Path, stage: str | None = None) -> str:
+    """What to do about a damaged stage output: rerun the stage the manifest beside it names (or the one of
+    the folder above: poses/undistorted/ is the poses stage's), else ``stage``. A file no stage wrote (a
+    capture's own cameras.json) is the user's to correct."""
+    stage = _writer(path) or stage
+    if stage is None:
+        return "correct the file"
+    return f"rerun `orca {stage}` (or snakemake --forcerun {stage})"
+
+
+def _writer(path: Path) -> str | None:
+    for folder in (path.parent, path.parent.parent):
+        try:
+            return str(read_json(folder / MANIFEST)["stage"])
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+    return None
+
+
+def _read_image_file(path: Path, reader: Any, written_by: Path, stage: str) -> np.ndarray:
+    """``reader(path)``; a missing or damaged image is an InputError saying which stage to rerun."""
+    try:
+        return reader(path)
+    except (OSError, ValueError) as e:
+        what = "file not found" if isinstance(e, FileNotFoundError) else "not a readable image"
+        raise InputError(what, path, rerun_fix(written_by, stage)) from e
+
 
 @dataclass(frozen=True)
 class DecodeArtifacts:
@@ -33,11 +76,11 @@ class DecodeArtifacts:
 
     @cached_property
     def meta(self) -> dict[str, Any]:
-        return read_json(self.folder / "decode.json")
+        return read_stage_json(self.folder / DECODE_JSON, "decode")
 
     @cached_property
     def manifest(self) -> dict[str, Any]:
-        return read_json(self.folder / MANIFEST)
+        return read_stage_json(self.folder / MANIFEST, "decode")
 
     @property
     def names(self) -> list[str]:
@@ -47,26 +90,44 @@ class DecodeArtifacts:
         for im in self.meta["images"]:
             if im["name"] == name:
                 return im
-        raise KeyError(f"{name!r} is not in {self.folder / 'decode.json'}; known: {', '.join(self.names)}")
+        raise KeyError(f"{name!r} is not in {self.folder / DECODE_JSON}; known: {', '.join(self.names)}")
+
+    def _image(self, name: str, kind: str, reader: Any) -> np.ndarray:
+        return _read_image_file(self.folder / self._entry(name)[kind], reader, self.folder / DECODE_JSON, "decode")
 
     def linear(self, name: str) -> np.ndarray:
         """``(H, W, 3)`` float32 linear, exposure-normalized radiance."""
-        return read_exr(self.folder / self._entry(name)["linear"])
+        return self._image(name, "linear", read_exr)
 
     def srgb(self, name: str) -> np.ndarray:
         """``(H, W, 3)`` uint8 sRGB."""
-        return read_image(self.folder / self._entry(name)["srgb"])
+        return self._image(name, "srgb", read_image)
 
     def clipped(self, name: str) -> np.ndarray:
         """``(H, W)`` bool, True where a highlight clipped."""
-        return read_image(self.folder / self._entry(name)["clipped"]) > 127
+        return self._image(name, "clipped", read_image) > 127
 
 
 def load_decode(folder: str | Path) -> DecodeArtifacts:
+    """The decode folder, checked whole: a stage given a damaged one stops here, naming what is wrong, rather
+    than at the first missing image it reaches (after minutes of work, with a traceback)."""
     folder = Path(folder)
-    if not (folder / "decode.json").is_file():
+    if not (folder / DECODE_JSON).is_file():
         raise InputError("not a decode artifact (no decode.json)", folder, "run `orca decode` on the capture first")
-    return DecodeArtifacts(folder)
+    decoded = DecodeArtifacts(folder)
+    path = folder / DECODE_JSON
+    meta, fix = decoded.meta, rerun_fix(path, "decode")
+    images = meta.get("images") if isinstance(meta, dict) else None
+    entries_ok = isinstance(images, list) and all(
+        isinstance(im, dict) and all(isinstance(im.get(k), str) for k in ("name", *IMAGE_FILES)) for im in images)
+    if not entries_ok or "size" not in meta:
+        raise InputError("decode.json lacks the image list or size (every image needs its name, linear, srgb and "
+                         "clipped files)", path, fix)
+    missing = [im[k] for im in images for k in IMAGE_FILES if not (folder / im[k]).is_file()]
+    if missing:
+        shown = ", ".join(missing[:5]) + (f" and {len(missing) - 5} more" if len(missing) > 5 else "")
+        raise InputError(f"{len(missing)} of the image files decode.json lists are missing: {shown}", folder, fix)
+    return decoded
 
 
 @dataclass(frozen=True)
@@ -77,7 +138,7 @@ class PosesArtifacts:
 
     @cached_property
     def report(self) -> dict[str, Any]:
-        return read_json(self.folder / "poses_report.json")
+        return read_stage_json(self.folder / "poses_report.json", "poses")
 
     def cameras(self):
         """:class:`~pipeline.cameras.CameraSet` in the object-centred unit-sphere frame."""
@@ -110,7 +171,7 @@ class MasksArtifacts:
 
     @cached_property
     def report(self) -> dict[str, Any]:
-        return read_json(self.folder / "masks_report.json")
+        return read_stage_json(self.folder / "masks_report.json", "masks")
 
     @property
     def names(self) -> list[str]:
@@ -121,7 +182,7 @@ class MasksArtifacts:
         path = self.folder / "masks" / f"{name}.png"
         if not path.is_file():
             raise KeyError(f"no mask {name!r} in {self.folder}; known: {', '.join(self.names[:10])}")
-        return read_image(path) > 127
+        return _read_image_file(path, read_image, self.folder / "masks_report.json", "masks") > 127
 
     def cameras(self):
         """:class:`~pipeline.cameras.CameraSet` re-normalized to the object's tight sphere (see the report)."""

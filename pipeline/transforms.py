@@ -17,10 +17,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from pydantic import ValidationError
 
-from .artifacts import read_json, write_json
-from .cameras import Camera, CameraSet
+from .artifacts import write_json
+from .cameras import Camera, CameraSet, as_matrix4, camera_problems
 from .errors import InputError
+from .results import read_stage_json
 
 FLIP_YZ = np.diag([1.0, -1.0, -1.0, 1.0])
 INTRINSICS = ("fl_x", "fl_y", "cx", "cy", "w", "h")
@@ -67,10 +69,7 @@ class KnownCameras:
 def load_transforms(path: str | Path) -> KnownCameras:
     """Read a nerfstudio/instant-ngp ``transforms.json``; camera names are the stems of ``file_path``."""
     path = Path(path)
-    try:
-        doc = read_json(path)
-    except (OSError, ValueError) as e:
-        raise InputError(f"cannot read transforms.json: {e}", path) from e
+    doc = read_stage_json(path)
     if not isinstance(doc, dict) or not isinstance(doc.get("frames"), list) or not doc["frames"]:
         raise InputError("transforms.json has no 'frames' list", path,
                          fix="use nerfstudio's format: {'fl_x', 'fl_y', 'cx', 'cy', 'w', 'h', 'frames': [...]}")
@@ -91,12 +90,14 @@ def load_transforms(path: str | Path) -> KnownCameras:
                 fx = fy = 0.5 * w / np.tan(0.5 * float(merged["camera_angle_x"]))
             else:
                 raise KeyError("fl_x or camera_angle_x")
-            c2w = opengl_from_opencv(np.asarray(frame["transform_matrix"], dtype=np.float64))
+            c2w = opengl_from_opencv(as_matrix4(frame["transform_matrix"], "transform_matrix"))
             cameras.append(Camera(name=name, image=str(frame["file_path"]), width=w, height=h, fx=fx, fy=fy,
                                   cx=float(merged.get("cx", w / 2)), cy=float(merged.get("cy", h / 2)),
                                   camera_to_world=c2w.tolist()))
         except KeyError as e:
             raise InputError(f"{where} lacks {e.args[0]}", path) from e
+        except ValidationError as e:  # before ValueError, which it is: one line per problem, not pydantic's dump
+            raise InputError(f"{where}: {'; '.join(camera_problems(e))}", path) from e
         except (TypeError, ValueError) as e:
             raise InputError(f"{where}: {e}", path) from e
         dist = {key: float(merged[key]) for key in DISTORTION if float(merged.get(key, 0.0) or 0.0) != 0.0}

@@ -323,3 +323,205 @@ def test_user_masks_of_photos_sfm_dropped_are_skipped(tiny_capture, tiny_decode,
 # ---------------------------------------------------------------- bad input accepted: another capture
 
 # ---------------------------------------------------------------- tracebacks and misleading messages
+
+
+def _orca_log(caplog, *args) -> tuple[int, str]:
+    """``orca ARGS`` in this process: its exit status and everything it logged (caplog, not the terminal)."""
+    from unittest import mock
+
+    from pipeline import cli
+
+    caplog.clear()
+    with mock.patch.object(cli, "setup_logging", lambda verbose=False: None), caplog.at_level("INFO"):
+        status = cli.main([str(a) for a in args])
+    return status, "\n".join(r.getMessage() for r in caplog.records)
+
+
+def _png_capture(folder: Path, n: int = 3) -> Path:
+    """``n`` 16x12 random PNG photos: enough for decode, made in milliseconds."""
+    import numpy as np
+
+    from pipeline.imageio import write_png
+
+    rng = np.random.default_rng(0)
+    for i in range(n):
+        write_png(folder / f"IMG_{i}.png", rng.integers(0, 200, (12, 16, 3), dtype=np.uint8))
+    return folder
+
+
+def _png_decode(tmp_path: Path) -> tuple[Path, Path]:
+    from pipeline.config import DecodeConfig
+    from pipeline.stages.decode import run_decode
+
+    capture = _png_capture(tmp_path / "cap")
+    run_decode(capture, tmp_path / "decode", DecodeConfig())
+    return capture, tmp_path / "decode"
+
+
+def test_a_missing_config_file_is_a_message(tmp_path, caplog):
+    """Item 10: `orca decode C --config missing.yaml` was a FileNotFoundError traceback."""
+    status, text = _orca_log(caplog, "decode", _png_capture(tmp_path / "cap"), "--config", tmp_path / "missing.yaml")
+    assert status == 2
+    assert str(tmp_path / "missing.yaml") in text and "not found" in text and text.count("Fix:") == 1
+
+
+def test_a_cli_option_out_of_range_is_a_message(tmp_path, caplog):
+    """Item 10: `orca mesh T --resolution 0` was a raw pydantic ValidationError."""
+    status, text = _orca_log(caplog, "mesh", tmp_path / "train", "--resolution", "0")
+    assert status == 2
+    assert "--resolution 0" in text and "greater than or equal to 16" in text and text.count("Fix:") == 1
+    assert "pydantic" not in text
+
+
+def test_a_damaged_decode_folder_is_a_message_naming_the_file(tmp_path, caplog):
+    """Item 10: `orca poses C --decode D` with D/decode.json cut short, or one sRGB PNG deleted, was a
+    JSONDecodeError / FileNotFoundError traceback."""
+    import shutil
+
+    capture, decode = _png_decode(tmp_path)
+    cut = Path(shutil.copytree(decode, tmp_path / "cut"))
+    (cut / "decode.json").write_text((decode / "decode.json").read_text()[:100])
+    status, text = _orca_log(caplog, "poses", capture, "--decode", cut, "--out", tmp_path / "poses1")
+    assert status == 2
+    assert str(cut / "decode.json") in text and "`orca decode`" in text and text.count("Fix:") == 1
+
+    (decode / "srgb" / "IMG_1.png").unlink()
+    status, text = _orca_log(caplog, "poses", capture, "--decode", decode, "--out", tmp_path / "poses2")
+    assert status == 2
+    assert "srgb/IMG_1.png" in text and "`orca decode`" in text and text.count("Fix:") == 1
+    assert not (tmp_path / "poses1").exists() and not (tmp_path / "poses2").exists()
+
+
+def test_a_damaged_stage_json_names_the_stage_to_rerun(tmp_path):
+    """Item 10: a stage's JSON (cameras.json, a report) cut short was a JSONDecodeError; the fix names the
+    stage that wrote it (its folder's manifest), and a capture's own file is the user's to correct."""
+    from pipeline.artifacts import write_manifest
+    from pipeline.cameras import load_cameras
+    from pipeline.errors import InputError
+    from pipeline.results import load_poses
+
+    poses = tmp_path / "poses"
+    poses.mkdir()
+    write_manifest(poses, stage="poses")
+    (poses / "cameras.json").write_text('{"cameras": [')
+    (poses / "poses_report.json").write_text("{")
+    with pytest.raises(InputError, match=r"cameras\.json: not valid JSON .*\nFix: rerun `orca poses`"):
+        load_cameras(poses / "cameras.json")
+    with pytest.raises(InputError, match=r"poses_report\.json: not valid JSON .*\nFix: rerun `orca poses`"):
+        _ = load_poses(poses).report
+    (tmp_path / "capture").mkdir()
+    (tmp_path / "capture" / "cameras.json").write_text("[")
+    with pytest.raises(InputError, match=r"capture/cameras\.json: not valid JSON .*\nFix: correct the file"):
+        load_cameras(tmp_path / "capture" / "cameras.json")
+
+
+def _camera_doc(n: int) -> dict:
+    from pipeline.cameras import Camera, CameraSet, look_at
+
+    cams = [Camera(name=f"IMG_{i:04d}", width=32, height=24, fx=30.0, fy=30.0, cx=16.0, cy=12.0,
+                   camera_to_world=look_at([3.0, float(i), 1.0], [0.0, 0.0, 0.0]).tolist()) for i in range(n)]
+    return CameraSet(cameras=cams).model_dump(mode="json")
+
+
+def _load_cameras_error(tmp_path, doc) -> str:
+    import json
+
+    from pipeline.cameras import load_cameras
+    from pipeline.errors import InputError
+
+    path = tmp_path / "cameras.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(InputError) as e:
+        load_cameras(path)
+    return str(e.value)
+
+
+def test_a_non_finite_camera_matrix_is_reported_as_such(tmp_path):
+    """Item 11: a NaN in a camera matrix read "expected a finite 4x4 matrix, got shape (4, 4)"."""
+    doc = _camera_doc(3)
+    doc["cameras"][1]["camera_to_world"][2][3] = float("nan")
+    text = _load_cameras_error(tmp_path, doc)
+    assert "camera IMG_0001: camera_to_world: expected finite numbers, got nan in row 3, column 4" in text
+    assert "shape" not in text
+
+
+def test_a_matrix_of_the_wrong_size_is_reported_as_such(tmp_path):
+    """Item 11: a 2x2 transform_matrix in a transforms.json gave numpy's matmul error."""
+    import json
+
+    from pipeline.errors import InputError
+    from pipeline.transforms import load_transforms
+
+    path = tmp_path / "transforms.json"
+    path.write_text(json.dumps({"fl_x": 30, "w": 32, "h": 24, "frames": [
+        {"file_path": "images/a.png", "transform_matrix": [[1, 0], [0, 1]]}]}))
+    with pytest.raises(InputError, match=r"frame 0 \(images/a.png\): transform_matrix: expected a 4x4 matrix "
+                                         r"\(4 rows of 4 numbers\), got 2 rows of 2 numbers") as e:
+        load_transforms(path)
+    assert "matmul" not in str(e.value)
+    doc = _camera_doc(2)
+    doc["cameras"][0]["camera_to_world"] = [[1, 0], [0, 1]]
+    assert "got 2 rows of 2 numbers" in _load_cameras_error(tmp_path, doc)
+
+
+def test_a_key_missing_from_every_camera_is_one_line(tmp_path):
+    """Item 11: one key missing in a cameras.json gave pydantic's 3 lines per camera (58 for 19 cameras)."""
+    doc = _camera_doc(19)
+    for cam in doc["cameras"]:
+        del cam["height"]
+    text = _load_cameras_error(tmp_path, doc)
+    assert text.splitlines()[0].endswith("19 cameras (IMG_0000, IMG_0001, IMG_0002, IMG_0003, IMG_0004, ...): "
+                                         "height: missing")
+    assert len(text.splitlines()) == 2 and text.count("Fix:") == 1 and "pydantic" not in text
+
+
+def test_config_errors_name_the_source_and_the_closest_key(tmp_path):
+    """Item 11: a misspelled key had no "did you mean"; config errors are one line per problem, each naming
+    the file or --set it came from."""
+    from pipeline.config import load_config, stage_config
+    from pipeline.errors import ConfigError
+
+    f = tmp_path / "my.yaml"
+    f.write_text("decode:\n  downscal: 2\ntrain:\n  env_near: 5\n  env_far: 2\n")
+    with pytest.raises(ConfigError) as e:
+        load_config(f, overrides=["poses.matcher=vocabulary"])
+    lines = str(e.value).splitlines()
+    assert lines[0] == "invalid configuration:" and lines[-1].startswith("Fix: ") and len(lines) == 5
+    assert f"  {f}: decode.downscal: unknown key; did you mean 'downscale'?" in lines
+    assert f"  {f}: train: env_far (2.0) must exceed env_near (5.0)" in lines
+    assert any(line.startswith("  --set poses.matcher=vocabulary: poses.matcher: input should be") for line in lines)
+    with pytest.raises(ConfigError, match=r"--set iteratoins=5: iteratoins: unknown key; did you mean "
+                                          r"'train.iterations'\?"):
+        stage_config("train", overrides=["iteratoins=5"])
+
+
+def test_a_bad_preset_in_capture_yaml_names_the_file(tmp_path, caplog):
+    """Item 11: `preset: fastt` in capture.yaml did not say which file set it."""
+    capture = _png_capture(tmp_path / "cap")
+    (capture / "capture.yaml").write_text("preset: fastt\n")
+    status, text = _orca_log(caplog, "decode", capture, "--out", tmp_path / "decode")
+    assert status == 2
+    assert f"{capture / 'capture.yaml'}: unknown preset 'fastt'; did you mean 'fast'?" in text
+    assert text.count("Fix:") == 1
+
+
+def test_unreadable_photos_get_one_fix(tmp_path, caplog):
+    """Item 11: "Fix:" was printed once per unreadable photo and once more for all of them."""
+    capture = _png_capture(tmp_path / "cap")
+    (capture / "IMG_1.png").write_bytes(b"not a png")
+    (capture / "IMG_2.png").write_bytes(b"")
+    status, text = _orca_log(caplog, "decode", capture, "--out", tmp_path / "decode")
+    assert status == 2
+    assert "2 of 3 photos cannot be read" in text and "- IMG_1.png: " in text and "- IMG_2.png: " in text
+    assert text.count("Fix:") == 1
+
+
+def test_exif_warnings_name_the_photo(tmp_path, caplog):
+    """Item 11: exifread's warnings ("PNG file does not have exif data.") did not say which photo."""
+    capture = _png_capture(tmp_path / "cap")
+    (capture / "IMG_1.png").write_bytes(b"not a png")
+    _orca_log(caplog, "decode", capture, "--out", tmp_path / "decode")
+    exif = [r.getMessage() for r in caplog.records if r.name == "exifread"]
+    assert len(exif) == 3, exif
+    for name, message in zip(["IMG_0.png", "IMG_1.png", "IMG_2.png"], exif):
+        assert message.startswith(f"{capture / name}: EXIF: ")

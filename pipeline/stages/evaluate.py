@@ -428,7 +428,9 @@ class GroundTruth:
 
     @cached_property
     def scene(self) -> dict[str, Any]:
-        return read_json(self.path("scene.json"))
+        from ..results import read_stage_json
+
+        return read_stage_json(self.path("scene.json"), "synth")
 
     @property
     def factor(self) -> float:

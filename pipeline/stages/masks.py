@@ -199,12 +199,12 @@ def image_folder(poses_dir: Path, cameras: CameraSet, decode_dir: Path | None) -
 def photos_without_camera(poses_dir: Path, decoded: DecodeArtifacts, names: list[str]) -> set[str]:
     """Decoded photos that got no camera (the poses stage lets SfM drop a few): those in the decoded folder and
     those the poses stage's report lists (its ``undistorted/`` folder holds only the posed photos)."""
-    from ..artifacts import read_json
+    from ..results import read_stage_json
     from .poses import REPORT_JSON as POSES_REPORT
 
     photos = set(decoded.names)
     if (poses_dir / POSES_REPORT).is_file():
-        photos |= set(read_json(poses_dir / POSES_REPORT).get("not_registered", []))
+        photos |= set(read_stage_json(poses_dir / POSES_REPORT, "poses").get("not_registered", []))
     return photos - set(names)
 
 
