@@ -514,6 +514,9 @@ def _yaml_problem(e: yaml.YAMLError) -> str:
     return f"{problem} at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else problem
 
 
+Layers = list[tuple[str, dict[str, Any]]]  # (where it came from: a file, "--set key=value"; its values)
+
+
 def load_config(
     *files: str | Path | None,
     preset: str | None = None,
@@ -531,9 +534,6 @@ def load_config(
         return PipelineConfig.model_validate(merged)
     except ValidationError as e:
         raise _invalid(e, layers, f"preset {chosen!r}") from e
-
-
-Layers = list[tuple[str, dict[str, Any]]]  # (where it came from: a file, "--set key=value"; its values)
 
 
 def _preset(given: str | None, layers: Layers) -> str:
