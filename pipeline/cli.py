@@ -10,7 +10,6 @@ import argparse
 import importlib
 import logging
 import os
-import signal
 import sys
 import threading
 
@@ -21,6 +20,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 from . import __version__
 from .errors import OrcaError
 from .log import setup_logging
+from .signals import stop_on_sigterm, stopped_by
 
 # (subcommand, module defining register()) in DAG order.
 COMMANDS: list[tuple[str, str]] = [
@@ -55,26 +55,21 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _terminate(signum: int, frame: object) -> None:
-    """SIGTERM (a job scheduler or Snakemake stopping the job) unwinds like Ctrl-C: stages then checkpoint
-    and remove their temporary folders instead of dying mid-write."""
-    raise KeyboardInterrupt(f"signal {signum}")
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     setup_logging(verbose=args.verbose)
     if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, _terminate)
+        stop_on_sigterm()
     try:
         args.func(args)
     except OrcaError as e:
         log.error("%s", e)
         return 2
-    except KeyboardInterrupt:
-        log.error("interrupted; nothing half-written was left behind")
-        return 130
+    except KeyboardInterrupt as e:
+        signum = stopped_by(e)
+        log.error("stopped by %s; nothing half-written was left behind", signum.name)
+        return 128 + signum
     return 0
 
 

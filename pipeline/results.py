@@ -150,9 +150,9 @@ class PosesArtifacts:
         """The COLMAP model (``pycolmap.Reconstruction``, COLMAP's frame); None for known cameras."""
         if not (self.folder / "sparse").is_dir():
             return None
-        import pycolmap
+        from .signals import import_pycolmap
 
-        return pycolmap.Reconstruction(self.folder / "sparse")
+        return import_pycolmap().Reconstruction(self.folder / "sparse")
 
 
 def load_poses(folder: str | Path) -> PosesArtifacts:

@@ -22,9 +22,10 @@ import numpy as np
 
 from .config import PosesConfig
 from .errors import InputError
+from .signals import import_pycolmap
 
 if TYPE_CHECKING:
-    import pycolmap
+    import pycolmap  # noqa: TID251 - annotations only
 
 log = logging.getLogger("orca.poses")
 
@@ -76,7 +77,7 @@ def num_threads(config: PosesConfig) -> int:
 
 def quiet_colmap(verbose: bool) -> None:
     """COLMAP logs every step through glog; keep its errors and our own summary unless debugging."""
-    import pycolmap
+    pycolmap = import_pycolmap()
 
     pycolmap.logging.minloglevel = 0 if verbose else 3  # our own errors say what its ERROR lines would
 
@@ -212,7 +213,7 @@ def run_sfm(
     Raises:
         InputError: no features, no initial pair, or too few photos registered (see the module doc).
     """
-    import pycolmap
+    pycolmap = import_pycolmap()
 
     seconds: dict[str, float] = {}
     folder = folder or image_dir
@@ -296,7 +297,7 @@ def run_sfm(
 
 
 def _mapper_options(config: PosesConfig, groups: Sequence[CameraGroup], threads: int, n: int):
-    import pycolmap
+    pycolmap = import_pycolmap()
 
     options = pycolmap.IncrementalPipelineOptions()
     options.num_threads = threads
@@ -317,7 +318,7 @@ def _mapper_options(config: PosesConfig, groups: Sequence[CameraGroup], threads:
 
 
 def _feature_counts(db_path: Path) -> dict[str, int]:
-    import pycolmap
+    pycolmap = import_pycolmap()
 
     db = pycolmap.Database.open(db_path)
     try:
@@ -329,7 +330,7 @@ def _feature_counts(db_path: Path) -> dict[str, int]:
 def _verified_pairs(db_path: Path, min_inliers: int) -> int:
     """Image pairs whose two-view geometry holds at least ``min_inliers`` matches (the database also keeps
     rows for pairs that failed verification)."""
-    import pycolmap
+    pycolmap = import_pycolmap()
 
     db = pycolmap.Database.open(db_path)
     try:
@@ -349,7 +350,7 @@ def _read_gray(path: Path) -> np.ndarray:
 def _no_model_error(db_path: Path, names: list[str], features: dict[str, int], num_verified: int,
                     folder: Path) -> InputError:
     """Why the mapper could not start: the best-matched pair and how far its matches moved."""
-    import pycolmap
+    pycolmap = import_pycolmap()
 
     db = pycolmap.Database.open(db_path)
     try:

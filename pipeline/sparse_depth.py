@@ -40,9 +40,10 @@ def load_sparse_points(sparse_dir: Path, cameras: CameraSet, min_track: int = 3)
     moved into the frame of ``cameras``: through its ``frame.to_colmap`` when it records one (the poses and
     masks stages' cameras), else by the similarity between the model's camera centres and theirs (known or
     ground-truth cameras of the same photos)."""
-    import pycolmap
-
     from .sfm import stem_of
+    from .signals import import_pycolmap
+
+    pycolmap = import_pycolmap()
 
     sparse_dir = Path(sparse_dir)
     if not (sparse_dir / "points3D.bin").is_file() and not (sparse_dir / "points3D.txt").is_file():

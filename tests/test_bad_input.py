@@ -171,6 +171,209 @@ def test_a_stage_removes_the_temporary_folders_killed_runs_left(tiny_capture, tm
 
 # ---------------------------------------------------------------- signals: SIGTERM, stale temporary folders
 
+# `orca ARGS` in which the function ``module:name`` (``sys.argv[1:3]``) touches the file ``sys.argv[3]`` and
+# waits instead of running: a signal sent once the file is there lands inside the stage, every time.
+_HELD_ORCA = """\
+import importlib, sys, time
+from pathlib import Path
+
+module, name, marker = sys.argv[1:4]
+
+
+def hold(*args, **kwargs):
+    Path(marker).touch()
+    time.sleep(600)
+
+
+setattr(importlib.import_module(module), name, hold)
+from pipeline.cli import main
+
+sys.exit(main(sys.argv[4:]))
+"""
+
+
+def _signal_when(proc, ready, what: str, signum: int = 15, group: bool = False, timeout: float = 300) -> str:
+    """Send ``signum`` (SIGTERM) to ``proc`` (to its whole process group with ``group``) once ``ready()``; its
+    output once it has exited. A test failing on the way kills it (100000 training steps would go on for hours)."""
+    import contextlib
+    import os
+    import signal
+    import time
+
+    deadline = time.time() + timeout
+    try:
+        while not ready():
+            assert proc.poll() is None, f"it ended before {what}:\n{proc.communicate()[0][-3000:]}"
+            assert time.time() < deadline, f"no {what} after {timeout} s"
+            time.sleep(0.1)
+        if group:
+            os.killpg(proc.pid, signum)
+        else:
+            proc.send_signal(signum)
+        return proc.communicate(timeout=120)[0]
+    except BaseException:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL) if group else proc.kill()
+        raise
+
+
+def _stopped_cleanly(output: str, folder: Path, signal_name: str = "SIGTERM") -> None:
+    """The log names the signal, no C++ stack dump (pycolmap's glog), no temporary folder left in ``folder``."""
+    assert f"stopped by {signal_name}" in output, output[-3000:]
+    assert "received by PID" not in output and "*** Aborted" not in output, output[-3000:]
+    assert not list(folder.rglob("*.partial")), "a temporary folder was left behind"
+
+
+@pytest.mark.parametrize(("stage", "signal_name", "status"),
+                         [("poses", "SIGTERM", 143), ("masks", "SIGTERM", 143), ("poses", "SIGINT", 130)])
+def test_sigterm_stops_a_stage_that_loaded_pycolmap_like_ctrl_c(stage, signal_name, status, tiny_capture,
+                                                                 tiny_decode, tmp_path):
+    """Item 3: importing pycolmap handed SIGTERM to glog, which aborted with a C++ stack dump and left
+    `.poses.*.partial` behind. The stage is held inside its temporary folder (after pycolmap is loaded) when the
+    signal comes. SIGTERM exits with 143, Ctrl-C (SIGINT) still with 130."""
+    import shutil
+    import signal
+    import subprocess
+    import sys
+
+    from pipeline.config import PosesConfig
+    from pipeline.stages.poses import run_poses
+
+    capture = _capture_copy(tiny_capture, tmp_path / "capture")
+    shutil.copy(capture / "ground_truth" / "cameras.json", capture / "cameras.json")  # known cameras: no SfM
+    shutil.copytree(capture / "ground_truth" / "masks", capture / "masks")  # the user's masks
+    results = tmp_path / "results"
+    args = ["poses", capture, "--decode", tiny_decode, "--out", results / "poses"]
+    held = "pipeline.stages.poses", "_figure"
+    if stage == "masks":
+        run_poses(capture, tiny_decode, results / "poses", PosesConfig())
+        args = ["masks", capture, "--poses", results / "poses", "--decode", tiny_decode, "--out", results / "masks"]
+        held = "pipeline.stages.masks", "_contact_sheet"
+    marker = tmp_path / "held"
+    proc = subprocess.Popen([sys.executable, "-c", _HELD_ORCA, *held, str(marker), *map(str, args)],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    output = _signal_when(proc, marker.exists, f"{stage} inside its temporary folder", signal.Signals[signal_name])
+    assert proc.returncode == status, output[-3000:]
+    _stopped_cleanly(output, results, signal_name)
+    assert not (results / stage).exists()
+
+
+def _colmap_model(cameras_json: Path, folder: Path) -> Path:
+    """A COLMAP text model of these cameras and of 8 points around the object that every photo sees: what
+    `orca train --points` reads (the poses stage's sparse/), without the time SfM takes."""
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    from pipeline.cameras import load_cameras
+
+    cameras = load_cameras(cameras_json).cameras
+    points = [np.array([2 * np.cos(a), 2 * np.sin(a), 0.5]) for a in np.linspace(0, 2 * np.pi, 8, endpoint=False)]
+    intrinsics, images = [], []
+    for i, c in enumerate(cameras, 1):
+        w2c = np.linalg.inv(np.asarray(c.camera_to_world))
+        q, t = Rotation.from_matrix(w2c[:3, :3]).as_quat(scalar_first=True), w2c[:3, 3]
+        seen = [w2c[:3, :3] @ x + t for x in points]
+        intrinsics.append(f"{i} PINHOLE {c.width} {c.height} {c.fx} {c.fy} {c.cx} {c.cy}\n")
+        images.append(f"{i} {' '.join(map(str, q))} {' '.join(map(str, t))} {i} {c.name}.png\n"
+                      + " ".join(f"{c.fx * p[0] / p[2] + c.cx} {c.fy * p[1] / p[2] + c.cy} {k}"
+                                 for k, p in enumerate(seen, 1)) + "\n")
+    track = " ".join(f"{i} {{k}}" for i in range(1, len(cameras) + 1))  # (image id, index of its 2D point)
+    folder.mkdir()
+    (folder / "cameras.txt").write_text("".join(intrinsics))
+    (folder / "images.txt").write_text("".join(images))
+    (folder / "points3D.txt").write_text("".join(f"{k + 1} {' '.join(map(str, x))} 128 128 128 0.5 "
+                                                 f"{track.format(k=k)}\n" for k, x in enumerate(points)))
+    return folder
+
+
+def test_sigterm_checkpoints_train_with_points_and_a_rerun_resumes(tiny_capture, tiny_decode, tmp_path, caplog):
+    """Item 3: `orca train --points` (as the Snakefile runs it) loads pycolmap, whose glog aborted on SIGTERM
+    with a C++ stack dump: no checkpoint at the signal, the steps since the last one lost."""
+    import subprocess
+    import sys
+
+    from pipeline.config import load_config
+    from pipeline.stages.train import checkpoint_dir_for, checkpoint_step, run_train
+
+    gt = tiny_capture / "ground_truth"
+    points = _colmap_model(gt / "cameras.json", tmp_path / "sparse")
+    out = tmp_path / "train"
+    overrides = [a for o in [*TINY_TRAIN, "train.iterations=100000", "train.checkpoint_every=100000"]
+                 for a in ("--set", o)]
+    proc = subprocess.Popen([sys.executable, "-m", "pipeline.cli", "train", "--decode", str(tiny_decode),
+                             "--ground-truth", str(gt), "--points", str(points), "--out", str(out),
+                             "--preset", "fast", *overrides], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True)
+    metrics = checkpoint_dir_for(out) / "metrics.jsonl"
+    output = _signal_when(proc, lambda: metrics.is_file() and len(metrics.read_text().splitlines()) >= 3,
+                          "3 training steps")
+    assert proc.returncode == 143, output[-3000:]
+    _stopped_cleanly(output, tmp_path)
+    assert "sparse depth:" in output  # the points were read: pycolmap was loaded
+    ckpts = sorted(checkpoint_dir_for(out).glob("step_*.pt"))
+    assert len(ckpts) == 1, "one checkpoint: the one written at the signal"
+    step = checkpoint_step(ckpts[0])
+    assert step >= 3 and not out.exists()
+    cfg = load_config(preset="fast", overrides=[*TINY_TRAIN, f"train.iterations={step + 2}"]).train
+    caplog.set_level("INFO")
+    resumed = run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, cfg, points_dir=points)
+    assert resumed is not None and resumed.iterations == step + 2
+    assert f"resuming from {ckpts[0]}" in caplog.text
+
+
+def test_a_snakemake_run_sigtermed_during_train_resumes_on_rerun(tiny_capture, tmp_path):
+    """Item 3: the tiny capture's DAG stopped during train the way Slurm's scancel stops a job (SIGTERM to each of
+    its processes; Snakemake itself, sent SIGTERM alone, waits for its running jobs to finish), then rerun: the
+    train job checkpointed at the signal, the rerun resumes from there, no temporary folder is left."""
+    import contextlib
+    import os
+    import shutil
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from test_snakemake import ROOT
+    from test_snakemake import TINY_TRAIN as DAG_OVERRIDES
+
+    from pipeline.stages.train import checkpoint_step
+
+    capture = Path(shutil.copytree(tiny_capture, tmp_path / "captures" / "tiny"))
+    shutil.copy(capture / "ground_truth" / "cameras.json", capture / "cameras.json")  # as in test_snakemake
+    shutil.copytree(capture / "ground_truth" / "masks", capture / "masks")
+    results = tmp_path / "results" / "tiny"
+
+    def snakemake(*overrides: str) -> subprocess.Popen:
+        sets = "[" + ",".join(f'"{o}"' for o in [*DAG_OVERRIDES, "train.log_every=1", *overrides]) + "]"
+        cmd = [sys.executable, "-m", "snakemake", "results/tiny/train", "--snakefile", str(ROOT / "Snakefile"),
+               "--directory", str(tmp_path), "--cores", "2", "--config", 'captures=["tiny"]', f"set={sets}"]
+        return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                start_new_session=True)
+
+    metrics, train_log = results / "train.checkpoints" / "metrics.jsonl", results / "logs" / "train.log"
+    first = snakemake("train.iterations=100000", "train.checkpoint_every=100000")
+    try:
+        output = _signal_when(first, lambda: metrics.is_file() and len(metrics.read_text().splitlines()) >= 2,
+                              "training steps", group=True)
+        assert first.returncode != 0, output[-3000:]
+        deadline = time.time() + 120  # the train job (its shell gone, no one's child) may still be checkpointing
+        while "stopped by SIGTERM" not in train_log.read_text() and time.time() < deadline:
+            time.sleep(0.2)
+    finally:
+        with contextlib.suppress(ProcessLookupError):  # a train job that did not stop must not run on for hours
+            os.killpg(first.pid, signal.SIGKILL)
+    _stopped_cleanly(train_log.read_text(), tmp_path)
+    ckpts = sorted((results / "train.checkpoints").glob("step_*.pt"))
+    assert len(ckpts) == 1 and not (results / "train").exists(), output[-3000:]
+    step = checkpoint_step(ckpts[0])
+    rerun = snakemake(f"train.iterations={step + 2}")
+    output = rerun.communicate(timeout=600)[0]
+    assert rerun.returncode == 0, output[-3000:]
+    assert f"resuming from {ckpts[0].relative_to(tmp_path)}" in train_log.read_text()
+    assert (results / "train" / "manifest.json").is_file()
+    assert not list(tmp_path.rglob("*.partial"))
+
+
 # ---------------------------------------------------------------- bad input accepted: masks
 
 

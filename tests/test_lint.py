@@ -1,4 +1,5 @@
-"""The tree passes ``ruff check`` with the config in pyproject.toml (line length 120, E/F/W/I/UP/B)."""
+"""The tree passes ``ruff check`` with the config in pyproject.toml (line length 120, E/F/W/I/UP/B, and
+pycolmap imported only through ``pipeline.signals.import_pycolmap``)."""
 
 from __future__ import annotations
 

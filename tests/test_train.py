@@ -53,7 +53,7 @@ def test_interrupted_training_resumes_from_its_checkpoint(tiny_capture, tiny_dec
 
 
 def test_a_terminated_orca_train_checkpoints_and_resumes(tiny_capture, tiny_decode, tmp_path):
-    """SIGTERM (what a scheduler sends) mid-training: a checkpoint at the step reached, exit code 130, and the
+    """SIGTERM (what a scheduler sends) mid-training: a checkpoint at the step reached, exit code 143, and the
     next run continues from there."""
     import signal
     import subprocess
@@ -74,7 +74,7 @@ def test_a_terminated_orca_train_checkpoints_and_resumes(tiny_capture, tiny_deco
         time.sleep(0.2)
     proc.send_signal(signal.SIGTERM)
     output, _ = proc.communicate(timeout=60)
-    assert proc.returncode == 130, output[-2000:]
+    assert proc.returncode == 143, output[-2000:]
     ckpts = sorted(checkpoint_dir_for(out).glob("step_*.pt"))
     assert ckpts, "no checkpoint was written on SIGTERM"
     step = load_checkpoint(ckpts[-1])["step"]

@@ -588,8 +588,9 @@ examples:
   orca train ... --set iterations=500 --device cpu     a short CPU run
   orca train ... --restart                             ignore checkpoints and start over
 
-Training resumes from the last checkpoint in <out>.checkpoints/ unless --restart is given; Ctrl-C saves a
-checkpoint first. Watch it live with: tensorboard --logdir <out>.checkpoints/tb
+Training resumes from the last checkpoint in <out>.checkpoints/ unless --restart is given; Ctrl-C or SIGTERM
+(a scheduler cancelling the job) saves a checkpoint first. Watch it live with:
+tensorboard --logdir <out>.checkpoints/tb
 """
 
 
