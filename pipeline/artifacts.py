@@ -235,6 +235,7 @@ def write_manifest(
     config: Mapping[str, Any] | None = None,
     started: float | None = None,
     extra: Mapping[str, Any] | None = None,
+    capture: Mapping[str, Any] | None = None,
 ) -> Path:
     """Write ``manifest.json`` into a stage folder: input hashes, config, versions, timing."""
     manifest: dict[str, Any] = {
@@ -244,6 +245,8 @@ def write_manifest(
         "config": dict(config or {}),
         "versions": versions(),
     }
+    if capture is not None:  # see pipeline.provenance
+        manifest["capture"] = dict(capture)
     if started is not None:
         manifest["seconds"] = round(time.time() - started, 3)
     if extra:

@@ -525,6 +525,46 @@ def test_user_masks_of_photos_sfm_dropped_are_skipped(tiny_capture, tiny_decode,
 
 # ---------------------------------------------------------------- bad input accepted: another capture
 
+
+def test_inputs_of_another_capture_are_refused(tiny_capture, tmp_path, caplog):
+    """Item 7: `orca poses` with another capture's --decode ran, `orca evaluate` against another capture's ground
+    truth printed a 22.9 deg pose error with exit 0. Each manifest records its capture; a mismatch stops the
+    stage unless --force, and a moved capture (the same photos) is still recognized."""
+    import shutil
+
+    from tiny_model import write_untrained_train_dir
+
+    from pipeline.artifacts import write_manifest
+    from pipeline.provenance import recorded_capture
+
+    a = _capture_copy(tiny_capture, tmp_path / "a")
+    b = _capture_copy(tiny_capture, tmp_path / "b")
+    photos = sorted(b.glob("IMG_*.dng"))
+    shutil.copy(photos[1], photos[0])  # another capture of the same scene: one photo differs
+    for capture in (a, b):
+        assert _orca("decode", capture, "--out", tmp_path / f"results_{capture.name}" / "decode") == 0
+        shutil.copy(capture / "ground_truth" / "cameras.json", capture / "cameras.json")  # known cameras: no SfM
+    decode_a, decode_b = tmp_path / "results_a" / "decode", tmp_path / "results_b" / "decode"
+    assert recorded_capture(decode_a)["id"] == recorded_capture(a / "ground_truth")["id"], "decode and synth agree"
+    assert recorded_capture(decode_a)["id"] != recorded_capture(decode_b)["id"]
+
+    poses = ["--set", "poses.use_masks=false"]
+    assert _orca("poses", a, "--decode", decode_b, "--out", tmp_path / "poses", *poses) == 2
+    assert "is not the one the other inputs came from" in caplog.text
+    assert not (tmp_path / "poses").exists()
+    assert _orca("poses", a, "--decode", decode_b, "--out", tmp_path / "poses", *poses, "--force") == 0
+    moved = _capture_copy(a, tmp_path / "moved")
+    assert _orca("poses", moved, "--decode", decode_a, "--out", tmp_path / "poses_moved", *poses) == 0
+    assert recorded_capture(tmp_path / "poses_moved")["id"] == recorded_capture(decode_a)["id"]
+
+    train = write_untrained_train_dir(tmp_path / "train")  # a model of capture b
+    write_manifest(train, stage="train", capture=recorded_capture(decode_b))
+    caplog.clear()
+    assert _orca("evaluate", train, "--ground-truth", a / "ground_truth", "--out", tmp_path / "evaluate") == 2
+    assert "the inputs come from different captures" in caplog.text and str(b) in caplog.text
+
+
+
 # ---------------------------------------------------------------- tracebacks and misleading messages
 
 

@@ -95,5 +95,6 @@ def test_orca_mesh_on_a_tiny_model(tmp_path):
     with pytest.raises(InputError, match="orca train"):
         from pipeline.stages.mesh import run_mesh
 
-        run_mesh(tmp_path, tmp_path / "nothing")
+        (tmp_path / "untrained").mkdir()
+        run_mesh(tmp_path / "untrained", tmp_path / "nothing")
     assert not (tmp_path / "nothing").exists()

@@ -264,8 +264,9 @@ def test_masks_of_any_encoding_give_the_same_sphere(tiny_capture, tiny_decode, t
     """0/1 and alpha-channel masks (as the masks stage reads them) bound the object like 0/255 ones."""
     from pipeline.imageio import read_image, write_png
 
-    shutil.copy(tiny_capture / "ground_truth" / "cameras.json", tmp_path / "cameras.json")
-    capture = tmp_path
+    capture = tmp_path / "capture"
+    capture.mkdir()
+    shutil.copy(tiny_capture / "ground_truth" / "cameras.json", capture / "cameras.json")
     truth = tiny_capture / "ground_truth" / "masks"
     spheres = {}
     for encoding in ("0-255", "0-1", "alpha"):

@@ -147,6 +147,7 @@ def run_decode(capture_dir: Path, out_dir: Path, config: DecodeConfig) -> Decode
     from .. import imageio, raw
     from ..artifacts import atomic_dir, write_json, write_manifest
     from ..log import progress
+    from ..provenance import capture_record
 
     started = time.time()
     capture_dir, out_dir = Path(capture_dir), Path(out_dir)
@@ -242,7 +243,8 @@ def run_decode(capture_dir: Path, out_dir: Path, config: DecodeConfig) -> Decode
         inputs = {f"photo:{i.path.name}": i.path for i in infos}
         if (capture_dir / "capture.yaml").is_file():
             inputs["capture.yaml"] = capture_dir / "capture.yaml"
-        write_manifest(tmp, stage="decode", inputs=inputs, config=config.model_dump(mode="json"), started=started)
+        write_manifest(tmp, stage="decode", inputs=inputs, config=config.model_dump(mode="json"), started=started,
+                       capture=capture_record(capture_dir, [i.path for i in infos]))
     seconds = time.time() - started
     lo, hi = min(scales), max(scales)
     log.info(

@@ -80,6 +80,7 @@ import numpy as np
 from ..artifacts import atomic_dir, file_sha256, read_json, write_json, write_manifest
 from ..cameras import Camera, CameraSet, load_cameras, scaled_intrinsics
 from ..errors import InputError
+from ..provenance import FORCE_HELP, common_capture
 from .render import render_environment_view, render_object_view, write_views
 
 log = logging.getLogger("orca.evaluate")
@@ -961,6 +962,7 @@ def run_evaluate(
     cameras: Path | None = None,
     mesh: Path | None = None,
     device: str = "auto",
+    force: bool = False,
 ) -> dict[str, Any]:
     """Evaluate a train folder against a ground-truth folder and write ``out_dir`` atomically.
 
@@ -994,6 +996,7 @@ def run_evaluate(
         raise InputError("mesh not found", mesh, "run `orca mesh` first, or drop --mesh")
     trained_on_gt = _trained_on(train_dir, gt.folder / "cameras.json")
     cameras = Path(cameras) if cameras is not None else _recorded_cameras(train_dir)
+    capture = common_capture([train_dir, gt.folder, cameras, mesh], force=force)
     poses: dict[str, Any] | None = None
     if cameras is not None:
         fitted, poses = align_cameras(load_cameras(cameras), gt.cameras, gt.object_centre, cameras)
@@ -1050,7 +1053,7 @@ def run_evaluate(
             inputs["mesh"] = Path(mesh)
         write_manifest(tmp, stage="evaluate", inputs=inputs, started=started,
                        config={"views": results.get("object", {}).get("views"), "downscale": downscale,
-                               "object": object, "environment": environment})
+                               "object": object, "environment": environment}, capture=capture)
     print_table(results)
     log.info("evaluate: wrote %s in %.1f s", out_dir, time.time() - started)
     return results
@@ -1096,6 +1099,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--no-object", action="store_true", help="skip the object views")
     p.add_argument("--no-environment", action="store_true", help="skip the environment views")
     p.add_argument("--device", choices=["auto", "cpu", "cuda"], default="auto", help="where to render")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.set_defaults(func=main)
 
 
@@ -1117,4 +1121,5 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
     out = args.out if args.out is not None else train_dir.parent / "evaluate"
     return run_evaluate(train_dir, args.ground_truth, out, views=args.views, downscale=args.downscale,
                         object=not args.no_object, environment=not args.no_environment,
-                        cameras=args.cameras or cameras, mesh=args.mesh or mesh, device=args.device)
+                        cameras=args.cameras or cameras, mesh=args.mesh or mesh, device=args.device,
+                        force=args.force)

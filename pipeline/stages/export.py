@@ -50,6 +50,7 @@ from ..artifacts import atomic_dir, read_json, write_json, write_manifest
 from ..cameras import Camera, CameraSet, load_cameras, look_at, save_cameras
 from ..config import ExportConfig, add_config_arguments, config_from_arguments
 from ..errors import InputError
+from ..provenance import common_capture
 
 log = logging.getLogger("orca.export")
 
@@ -362,6 +363,7 @@ def run_export(train_dir: Path, out_dir: Path, cfg: ExportConfig | None = None, 
     weights = train_dir / FINAL_WEIGHTS
     if not weights.is_file():
         raise InputError("no trained model here", weights, "run `orca train` first (it writes model.pt when done)")
+    capture = common_capture([train_dir, cameras], force=True)  # --cameras of another capture: a warning
     train_cams, cams_from = training_cameras(train_dir, cameras)
     if train_cams is None:
         log.warning("export: no training cameras (%s): z is up, the orbit uses defaults and there are no object "
@@ -476,7 +478,7 @@ def run_export(train_dir: Path, out_dir: Path, cfg: ExportConfig | None = None, 
         inputs = {"model": weights}
         if train_cams is not None and cameras is not None:
             inputs["cameras"] = Path(cameras)
-        write_manifest(tmp, stage="export", inputs=inputs, config=cfg.model_dump(), started=started)
+        write_manifest(tmp, stage="export", inputs=inputs, config=cfg.model_dump(), started=started, capture=capture)
     log.info("export: wrote %s in %.1f s (%s)", out_dir, time.time() - started,
              ", ".join(f"{k} {v:.0f} s" for k, v in timing.items()))
     return report

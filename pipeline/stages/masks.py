@@ -56,6 +56,7 @@ import numpy as np
 from ..artifacts import stage_dir
 from ..config import MasksConfig, add_config_arguments, config_from_arguments
 from ..errors import InputError
+from ..provenance import FORCE_HELP
 
 if TYPE_CHECKING:
     from ..cameras import CameraSet
@@ -254,12 +255,14 @@ def run_masks(
     *,
     decode_dir: Path | None = None,
     user_masks_dir: Path | None = None,
+    force: bool = False,
 ) -> MasksResult:
     """Object masks for every posed photo into ``out_dir`` (see the module doc)."""
     from ..artifacts import atomic_dir, check_output_dir, write_json, write_manifest
     from ..cameras import load_cameras
     from ..log import progress
     from ..object_frame import sphere_from_masks
+    from ..provenance import check_capture_folder, common_capture
     from ..results import load_decode
     from ..silhouette import carve, carve_votes, hull_grid, iou, reproject, segment
     from .poses import recorded_undistortion
@@ -268,6 +271,9 @@ def run_masks(
     poses_dir, out_dir = Path(poses_dir), Path(out_dir)
     sources = [p for p in (capture_dir, poses_dir, decode_dir, user_masks_dir) if p is not None]
     check_output_dir(out_dir, "masks", sources)  # before minutes of segmentation, not after
+    capture = common_capture([poses_dir, decode_dir, user_masks_dir], force=force)
+    if capture_dir is not None:
+        check_capture_folder(capture_dir, capture, force=force)
     cameras = load_cameras(poses_dir / CAMERAS_JSON)
     names = [c.name for c in cameras.cameras]
     if len(names) < 2:
@@ -376,7 +382,8 @@ def run_masks(
         inputs: dict[str, Path] = {"cameras.json": poses_dir / CAMERAS_JSON, "decode.json": decoded.folder /
                                    "decode.json"}
         inputs.update({f"user_mask:{n}": p for n, p in user_files.items()})
-        write_manifest(tmp, stage="masks", inputs=inputs, config=config.model_dump(mode="json"), started=started)
+        write_manifest(tmp, stage="masks", inputs=inputs, config=config.model_dump(mode="json"), started=started,
+                       capture=capture)
     seconds = time.time() - started
     summary = report["agreement"]
     log.info("masks: %d views (%d user, %d automatic), hull agreement IoU median %.3f (worst %.3f, %s), object "
@@ -624,6 +631,7 @@ def register(subparsers: Any) -> None:
                    help="decode folder, if cameras.json has no image paths (default: results/<capture>/decode)")
     p.add_argument("--out", type=Path, default=None, help="output folder (default: results/<capture>/masks)")
     p.add_argument("--user-masks", type=Path, default=None, help="folder of <name>.png masks (default: CAPTURE/masks)")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     add_config_arguments(p)
     p.set_defaults(func=main)
 
@@ -633,4 +641,4 @@ def main(args: argparse.Namespace) -> MasksResult:
     config = config_from_arguments(args, "masks", capture / "capture.yaml")
     poses, out = stage_dir(capture, "poses", args.poses), stage_dir(capture, "masks", args.out)
     return run_masks(capture, poses, out, config.masks, decode_dir=stage_dir(capture, "decode", args.decode),
-                     user_masks_dir=args.user_masks)
+                     user_masks_dir=args.user_masks, force=args.force)

@@ -40,6 +40,7 @@ import numpy as np
 from ..artifacts import atomic_dir, check_output_dir, read_json, write_json, write_manifest
 from ..config import MeshConfig, add_config_arguments, config_from_arguments, with_values
 from ..errors import InputError
+from ..provenance import common_capture
 
 log = logging.getLogger("orca.mesh")
 
@@ -356,6 +357,7 @@ def run_mesh(train_dir: Path, out_dir: Path, cfg: MeshConfig | None = None, *, c
     train_dir, out_dir = Path(train_dir), Path(out_dir)
     sources = [train_dir, *([cameras] if cameras else [])]
     check_output_dir(out_dir, "mesh", sources)
+    capture = common_capture(sources, force=True)  # --cameras of another capture: only the frame is taken from it
     weights = train_dir / FINAL_WEIGHTS
     if not weights.is_file():
         raise InputError("no trained model here", weights, "run `orca train` first (it writes model.pt when done)")
@@ -393,7 +395,8 @@ def run_mesh(train_dir: Path, out_dir: Path, cfg: MeshConfig | None = None, *, c
         mesh_picture(mesh, tmp / MESH_PNG)
         report["seconds_total"] = round(time.time() - started, 2)
         write_json(tmp / MESH_REPORT, report)
-        write_manifest(tmp, stage="mesh", inputs={"model": weights}, config=cfg.model_dump(), started=started)
+        write_manifest(tmp, stage="mesh", inputs={"model": weights}, config=cfg.model_dump(), started=started,
+                       capture=capture)
     log.info("mesh: %d vertices, %d triangles, %s, %d piece(s) kept of %d -> %s (%.1f s)", props["vertices"],
              props["triangles"], "watertight" if props.get("watertight") else "NOT watertight",
              cleaning["components_kept"], cleaning["components"], out_dir, time.time() - started)

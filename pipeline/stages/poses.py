@@ -58,6 +58,7 @@ from ..artifacts import stage_dir
 from ..cameras import Camera, CameraSet, load_cameras, save_cameras
 from ..config import PosesConfig, add_config_arguments, config_from_arguments
 from ..errors import InputError
+from ..provenance import FORCE_HELP
 from .masks import read_user_mask
 
 if TYPE_CHECKING:
@@ -110,9 +111,11 @@ def run_poses(
     config: PosesConfig,
     *,
     masks_dir: Path | None = None,
+    force: bool = False,
 ) -> PosesResult:
     """Cameras for the decoded photos of ``capture_dir`` into ``out_dir`` (see the module doc)."""
     from ..artifacts import atomic_dir, write_json, write_manifest
+    from ..provenance import check_capture_folder, common_capture
     from ..results import load_decode
     from ..sfm import check_not_identical, quiet_colmap, thumbnail
 
@@ -120,6 +123,8 @@ def run_poses(
     capture_dir, decode_dir, out_dir = Path(capture_dir), Path(decode_dir), Path(out_dir)
     quiet_colmap(log.isEnabledFor(logging.DEBUG))
     decoded = load_decode(decode_dir)
+    capture = common_capture([decode_dir, masks_dir], force=force)
+    check_capture_folder(capture_dir, capture, force=force)
     names = decoded.names
     width, height = (int(v) for v in decoded.meta["size"])
     photo_dir = capture_dir / decoded.meta.get("photo_folder", ".") if capture_dir.is_dir() else decode_dir
@@ -181,7 +186,7 @@ def run_poses(
         write_json(tmp / REPORT_JSON, report)
         _figure(tmp / FIGURE, cameras, points_n, posed.point_colors, report)
         write_manifest(tmp, stage="poses", inputs=inputs, config=config.model_dump(mode="json"), started=started,
-                       extra={"source": source})
+                       extra={"source": source}, capture=capture)
     seconds = time.time() - started
     log.info(
         "poses: %d/%d photos have cameras (%s), object centre %s radius %.3g (%s)%s -> %s (%.1f s)",
@@ -717,6 +722,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--decode", type=Path, default=None, help="decode stage folder (default: results/<capture>/decode)")
     p.add_argument("--out", type=Path, default=None, help="output folder (default: results/<capture>/poses)")
     p.add_argument("--masks", type=Path, default=None, help="object masks <name>.png (default: CAPTURE/masks if any)")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     add_config_arguments(p)
     p.set_defaults(func=main)
 
@@ -725,4 +731,4 @@ def main(args: argparse.Namespace) -> PosesResult:
     capture = Path(args.capture)
     config = config_from_arguments(args, "poses", capture / "capture.yaml")
     decode, out = stage_dir(capture, "decode", args.decode), stage_dir(capture, "poses", args.out)
-    return run_poses(capture, decode, out, config.poses, masks_dir=args.masks)
+    return run_poses(capture, decode, out, config.poses, masks_dir=args.masks, force=args.force)

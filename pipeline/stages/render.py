@@ -27,6 +27,7 @@ from ..artifacts import atomic_dir, write_manifest
 from ..cameras import Camera, CameraSet, load_cameras, save_cameras, scaled_intrinsics
 from ..errors import InputError
 from ..imageio import to_srgb8, write_exr, write_png
+from ..provenance import common_capture
 
 log = logging.getLogger("orca.render")
 
@@ -177,7 +178,8 @@ def run_render(
         save_cameras(tmp / "views.json", CameraSet(frame=cameras.frame, cameras=[
             rendered_camera(c, downscale, f"{c.name}_rgb.exr") for c in cameras.cameras]))
         write_manifest(tmp, stage="render", inputs={"model": Path(train_dir) / "model.pt", "cameras": cameras_path},
-                       config={"environment": environment, "downscale": downscale}, started=started)
+                       config={"environment": environment, "downscale": downscale}, started=started,
+                       capture=common_capture([train_dir]))  # any cameras may be rendered: not checked
     log.info("rendered %d %s view(s) -> %s (%.1f s)", len(cameras), "environment" if environment else "object",
              out_dir, time.time() - started)
     return out_dir

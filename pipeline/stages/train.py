@@ -28,6 +28,7 @@ from ..artifacts import atomic_dir, atomic_path, check_output_dir, remove_stale_
 from ..cameras import load_cameras
 from ..config import TrainConfig, add_config_arguments, config_from_arguments
 from ..errors import InputError, OrcaError
+from ..provenance import FORCE_HELP, common_capture
 
 log = logging.getLogger("orca.train")
 
@@ -388,6 +389,7 @@ def run_train(
     points_dir: Path | None = None,
     restart: bool = False,
     max_steps: int | None = None,
+    force: bool = False,
 ) -> TrainResult | None:
     """Train (or resume training) and write the train folder when the last iteration is done.
 
@@ -405,6 +407,7 @@ def run_train(
     ckpt_dir = checkpoint_dir_for(out_dir)
     sources = [p for p in (decode_dir, cameras_path, masks_dir, points_dir) if p is not None]
     check_output_dir(out_dir, "train", sources)  # before hours of training, not after
+    capture = common_capture(sources, force=force)
     remove_stale_temporaries(out_dir)
     device = resolve_device(cfg.device)
     torch.manual_seed(cfg.seed)
@@ -555,7 +558,7 @@ def run_train(
             "sparse_depth_pixels": len(data.depth) if data.depth is not None else 0,
         })
         write_manifest(tmp, stage="train", inputs={"cameras": cameras_path, "decode": decode_dir / "decode.json"},
-                       config=cfg.model_dump(), started=started)
+                       config=cfg.model_dump(), started=started, capture=capture)
     log.info("train: wrote %s", out_dir)
     return TrainResult(out_dir, step, time.time() - started, final_losses)
 
@@ -612,6 +615,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--out", type=Path, default=None, help="output folder (default: beside --decode, train/)")
     p.add_argument("--device", choices=["auto", "cpu", "cuda"], default=None, help="overrides train.device")
     p.add_argument("--restart", action="store_true", help="discard checkpoints and train from scratch")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     add_config_arguments(p)
     p.set_defaults(func=main)
 
@@ -629,4 +633,4 @@ def main(args: argparse.Namespace) -> TrainResult | None:
     cfg = config.train if args.device is None else config.train.model_copy(update={"device": args.device})
     out = args.out if args.out is not None else Path(args.decode).parent / "train"
     return run_train(Path(args.decode), Path(cameras), Path(masks), out, cfg, points_dir=args.points,
-                     restart=args.restart)
+                     restart=args.restart, force=args.force)

@@ -54,6 +54,7 @@ from ..cameras import CameraSet, Frame, save_cameras
 from ..errors import InputError
 from ..imageio import to_srgb8, write_exr, write_png
 from ..log import progress
+from ..provenance import capture_record
 from . import build, geometry
 from .rig import PinholeView, capture_views, environment_views
 from .scenes import ResolvedScene, SceneSpec, get_scene, resolve
@@ -530,8 +531,10 @@ def render_capture(scene: str | SceneSpec, out_dir: str | Path, options: SynthOp
         timing = {"views": len(views), "seconds_per_view": float(np.mean(view_seconds)),
                   "environment_views": len(env_views), "seconds_per_environment_view": float(np.mean(env_seconds)),
                   "total_seconds": round(time.time() - started, 2)}
+        # the capture record of the photos as they will lie in out_dir: evaluate checks a model against its own
+        capture = {**capture_record(tmp, [tmp / p["image"] for p in photos]), "folder": str(out_dir.resolve())}
         write_manifest(gt, stage="synth", config={"scene": spec.name, "options": asdict(options)},
-                       started=started, extra={"timing": timing})
+                       started=started, extra={"timing": timing}, capture=capture)
         log.info("rendered %d views (%.1f s each) and %d environment views (%.1f s each) in %.0f s -> %s",
                  len(views), timing["seconds_per_view"], len(env_views), timing["seconds_per_environment_view"],
                  time.time() - started, out_dir)
