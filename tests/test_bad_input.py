@@ -479,7 +479,7 @@ def test_train_refuses_masks_of_another_aspect_ratio_like_the_masks_stage(tiny_c
 
     from pipeline.errors import InputError
     from pipeline.imageio import read_image, write_png
-    from pipeline.stages.masks import read_user_mask
+    from pipeline.mask_file import read_mask
     from pipeline.stages.train import load_image_set
 
     truth = tiny_capture / "ground_truth"
@@ -497,7 +497,7 @@ def test_train_refuses_masks_of_another_aspect_ratio_like_the_masks_stage(tiny_c
     with pytest.raises(InputError, match="aspect ratio") as by_train:
         load_image_set(tiny_decode, truth / "cameras.json", rotated)
     with pytest.raises(InputError, match="aspect ratio") as by_masks:
-        read_user_mask(rotated / f"{names[0]}.png", (48, 36))
+        read_mask(rotated / f"{names[0]}.png", (48, 36))
     assert f"{names[0]}.png" in str(by_train.value) and "Fix:" in str(by_train.value)
     assert str(by_train.value) == str(by_masks.value)  # one rule, one message
 
@@ -768,3 +768,21 @@ def test_exif_warnings_name_the_photo(tmp_path, caplog):
     assert len(exif) == 3, exif
     for name, message in zip(["IMG_0.png", "IMG_1.png", "IMG_2.png"], exif):
         assert message.startswith(f"{capture / name}: EXIF: ")
+
+
+def test_a_damaged_mask_for_training_is_a_message_naming_it(tiny_capture, tiny_decode, tmp_path):
+    """`orca train --masks` with a damaged PNG gave a raw ValueError; masks are read by the masks stage's rule."""
+    import shutil
+
+    from pipeline.config import load_config
+    from pipeline.errors import InputError
+    from pipeline.stages.train import run_train
+
+    gt = tiny_capture / "ground_truth"
+    masks = Path(shutil.copytree(gt / "masks", tmp_path / "masks"))
+    damaged = sorted(masks.glob("*.png"))[0]
+    damaged.write_bytes(b"\x89PNG\r\n\x1a\n cut short")
+    cfg = load_config(preset="fast", overrides=TINY_TRAIN).train
+    with pytest.raises(InputError, match="not a readable image") as e:
+        run_train(tiny_decode, gt / "cameras.json", masks, tmp_path / "train", cfg, max_steps=1)
+    assert str(damaged) in str(e.value) and str(e.value).count(str(damaged)) == 1

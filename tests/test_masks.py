@@ -17,6 +17,7 @@ from pipeline.cameras import load_cameras, look_at
 from pipeline.config import MasksConfig, PosesConfig
 from pipeline.errors import InputError
 from pipeline.imageio import read_image, write_png
+from pipeline.mask_file import read_mask
 from pipeline.silhouette import (
     Plane,
     SegmentOptions,
@@ -37,7 +38,7 @@ from pipeline.silhouette import (
     sphere_distance,
     spread,
 )
-from pipeline.stages.masks import find_user_masks, read_user_mask
+from pipeline.stages.masks import find_user_masks
 
 
 def disc_mask(h: int = 36, w: int = 48) -> np.ndarray:
@@ -68,19 +69,19 @@ def test_every_mask_encoding_reads_the_same(tmp_path, encoding):
         from PIL import Image
 
         Image.fromarray(np.dstack([np.full_like(m, 128), m * 255]), mode="LA").save(path)
-    np.testing.assert_array_equal(read_user_mask(path, (48, 36)), truth)
+    np.testing.assert_array_equal(read_mask(path, (48, 36)), truth)
 
 
 def test_a_mask_at_another_scale_is_resized_and_another_aspect_is_refused(tmp_path):
     big = cv2.resize(disc_mask().astype(np.uint8) * 255, (96, 72), interpolation=cv2.INTER_NEAREST)
     write_png(tmp_path / "a.png", big)
-    assert iou(read_user_mask(tmp_path / "a.png", (48, 36)), disc_mask()) > 0.95
+    assert iou(read_mask(tmp_path / "a.png", (48, 36)), disc_mask()) > 0.95
     write_png(tmp_path / "b.png", np.zeros((48, 36), np.uint8))  # rotated: 36x48 for a 48x36 photo
     with pytest.raises(InputError, match=r"b\.png.*36x48.*48x36.*aspect ratio"):
-        read_user_mask(tmp_path / "b.png", (48, 36))
+        read_mask(tmp_path / "b.png", (48, 36))
     (tmp_path / "c.png").write_bytes(b"not a png")
     with pytest.raises(InputError, match=r"c\.png.*not a readable image"):
-        read_user_mask(tmp_path / "c.png", (48, 36))
+        read_mask(tmp_path / "c.png", (48, 36))
 
 
 def test_mask_names_must_match_the_photos(tmp_path):

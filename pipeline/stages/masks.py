@@ -21,7 +21,7 @@ improve the others). Files whose name matches no photo, a mask of another aspect
 empty mask (under ``masks.user_mask_min_fraction`` of the image; only empty ones: always), an unreadable file
 or a multi-page TIFF stop the stage with an :class:`~pipeline.errors.InputError` naming the files and the fix;
 a mask at another size with the photo's aspect ratio (drawn on the original while decode downscaled) is
-resized, with a log line (:mod:`pipeline.mask_size`, training's rule too). Masks of photos that got no camera
+resized, with a log line (:mod:`pipeline.mask_file`, training's rule too). Masks of photos that got no camera
 (SfM dropped them) are skipped, with a log line. Drawn on the photos, they are resampled like the photos when
 the poses stage undistorted them (its ``undistorted/decode.json`` records the lenses).
 
@@ -56,6 +56,7 @@ import numpy as np
 from ..artifacts import stage_dir
 from ..config import MasksConfig, add_config_arguments, config_from_arguments
 from ..errors import InputError
+from ..mask_file import read_mask
 from ..provenance import FORCE_HELP
 
 if TYPE_CHECKING:
@@ -140,42 +141,12 @@ def find_user_masks(folder: Path, names: list[str], no_camera: Collection[str] =
     return found
 
 
-def read_user_mask(path: Path, size: tuple[int, int]) -> np.ndarray:
-    """``(H, W)`` bool (True = object) from any common mask encoding (see the module doc), at ``size``
-    (width, height).
-
-    Raises:
-        InputError: unreadable, or an aspect ratio unlike the photo's (rotated, cropped, another photo).
-    """
-    from ..imageio import read_image
-    from ..mask_size import mask_at_photo_size
-
-    try:
-        m = read_image(path)
-    except (ValueError, OSError) as e:
-        raise InputError(f"not a readable image: {e}", path, fix="save the mask as an 8-bit PNG") from e
-    if m.ndim == 3 and m.shape[2] in (2, 4) and m[..., -1].min() != m[..., -1].max():
-        m = m[..., -1]  # a cut-out: the alpha channel is the mask
-    elif m.ndim == 3:
-        m = m[..., : min(3, m.shape[2])].max(axis=-1)
-    if m.dtype.kind == "f":
-        m = np.nan_to_num(m)
-    m = mask_at_photo_size(m, size, path)
-    top = float(m.max())
-    if top <= 0:
-        log.warning("%s: the mask is empty (no object pixels)", path)
-        return np.zeros(m.shape, bool)
-    # 0/1 masks (max 1) and 0/255 or 0/65535 masks alike: above half of the encoding's full scale.
-    full = 1.0 if top <= 1.0 else (255.0 if top <= 255.0 else 65535.0)
-    return m > full / 2
-
-
 def user_mask(path: Path, cam: Any, undistortion: UndistortMaps | None) -> np.ndarray:
     """A user's mask for camera ``cam``, in the pixel grid of the images the cameras point at: resampled
     like the photo when the poses stage undistorted it."""
     from .poses import undistort_mask
 
-    m = read_user_mask(path, (cam.width, cam.height))
+    m = read_mask(path, (cam.width, cam.height))
     return undistort_mask(m, undistortion, cam.name) if undistortion is not None else m
 
 

@@ -58,8 +58,8 @@ from ..artifacts import stage_dir
 from ..cameras import Camera, CameraSet, load_cameras, save_cameras
 from ..config import PosesConfig, add_config_arguments, config_from_arguments
 from ..errors import InputError
+from ..mask_file import read_mask
 from ..provenance import FORCE_HELP
-from .masks import read_user_mask
 
 if TYPE_CHECKING:
     import pycolmap  # noqa: TID251 - annotations only
@@ -241,7 +241,7 @@ def _hull_masks(files: dict[str, Path], posed: Posed, und: UndistortMaps | None,
     small = (max(1, round(size[0] * scale)), max(1, round(size[1] * scale)))
     out = []
     for n in posed.names:
-        m = read_user_mask(files[n], size)
+        m = read_mask(files[n], size)
         if und is not None:
             m = undistort_mask(m, und, n)
         m = m.astype(np.uint8)
@@ -572,7 +572,7 @@ def _write_feature_masks(files: dict[str, Path], size: tuple[int, int], folder: 
     r = config.mask_dilate_px
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)) if r else None
     for n, path in files.items():
-        obj = read_user_mask(path, size).astype(np.uint8)
+        obj = read_mask(path, size).astype(np.uint8)
         if kernel is not None:
             obj = cv2.dilate(obj, kernel)
         imageio.write_png(folder / f"{colmap_name(n)}.png", np.where(obj > 0, 0, 255).astype(np.uint8))

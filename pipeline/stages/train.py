@@ -64,8 +64,7 @@ def load_image_set(decode_dir: Path, cameras_path: Path, masks_dir: Path, points
 
     from orca.data import ImageSet
 
-    from ..imageio import read_image
-    from ..mask_size import mask_at_photo_size
+    from ..mask_file import read_mask
     from ..results import load_decode
 
     decoded = load_decode(decode_dir)
@@ -93,15 +92,12 @@ def load_image_set(decode_dir: Path, cameras_path: Path, masks_dir: Path, points
         mask_path = masks_dir / f"{name}.png"
         if not mask_path.is_file():
             raise InputError(f"no mask for image {name}", mask_path, "run the masks stage, or add the missing mask")
-        m = read_image(mask_path)
-        m = m[..., 0] if m.ndim == 3 else m
-        thresh = np.iinfo(m.dtype).max / 2 if m.dtype.kind == "u" else 0.5
-        m = mask_at_photo_size(m, (w, h), mask_path)
+        m = read_mask(mask_path, (w, h))
         K = cam.K.copy()
         K[0] *= sx
         K[1] *= sy
         images.append(img[..., :3])
-        masks.append(m > thresh)
+        masks.append(m)
         valid.append(~decoded.clipped(name))
         Ks.append(K)
         c2ws.append(cam.c2w)
