@@ -440,6 +440,23 @@ def test_all_black_user_masks_are_refused_naming_them(tiny_capture, tiny_decode,
     assert not (tmp_path / "masks").exists()
 
 
+def test_an_empty_user_mask_is_refused_by_the_poses_stage_too(tiny_capture, tiny_decode, tmp_path):
+    """Item 5, poses: one black mask carved the object out of the hull the poses stage's sphere comes from."""
+    import shutil
+
+    from pipeline.config import PosesConfig
+    from pipeline.errors import InputError
+    from pipeline.stages.poses import run_poses
+
+    capture = tmp_path / "capture"  # a folder of settings for the decoded photos: known cameras, masks
+    capture.mkdir()
+    shutil.copy(tiny_capture / "ground_truth" / "cameras.json", capture / "cameras.json")
+    names = _true_user_masks(tiny_capture, capture / "masks", blank=_names(tiny_capture)[1:2])
+    with pytest.raises(InputError, match=rf"1 of {len(names)} masks are empty \(no object pixel\): {names[1]}.png"):
+        run_poses(capture, tiny_decode, tmp_path / "poses", PosesConfig())
+    assert not (tmp_path / "poses").exists()
+
+
 def test_one_empty_or_nearly_empty_user_mask_is_refused_naming_it(tiny_capture, tiny_decode, tmp_path):
     import pytest
 

@@ -132,7 +132,7 @@ def run_poses(
         raise InputError(f"only {len(names)} decoded photo(s); poses need at least 2", decode_dir,
                          fix="add photos to the capture and rerun decode")
     known_file = _known_cameras_file(capture_dir, config)
-    mask_files = _mask_files(masks_dir, capture_dir, names, config)
+    mask_files = _mask_files(masks_dir, capture_dir, names, (width, height), config)
     calibration = _calibration(capture_dir, width, height)
     inputs: dict[str, Path] = {"decode.json": decode_dir / "decode.json"}
     for key, path in (("known_cameras", known_file), ("calibration", calibration[2] if calibration else None)):
@@ -212,10 +212,14 @@ def _known_cameras_file(capture_dir: Path, config: PosesConfig) -> Path | None:
     return found[0]
 
 
-def _mask_files(masks_dir: Path | None, capture_dir: Path, names: list[str],
+def _mask_files(masks_dir: Path | None, capture_dir: Path, names: list[str], size: tuple[int, int],
                 config: PosesConfig) -> dict[str, Path] | None:
     """Object mask files per photo, or None when there are none or they are not wanted. Masks are read one
-    at a time where needed (200 full-size masks would not fit in memory together)."""
+    at a time where needed (200 full-size masks would not fit in memory together).
+
+    Raises:
+        InputError: empty masks (one carves the object out of the visual hull the sphere comes from), named.
+    """
     if masks_dir is None:
         if not config.use_masks or not (capture_dir / "masks").is_dir():
             return None
@@ -227,8 +231,15 @@ def _mask_files(masks_dir: Path | None, capture_dir: Path, names: list[str],
         log.warning("%s: no mask for %d of %d photos (%s); masks are not used", masks_dir, len(missing), len(names),
                     ", ".join(missing[:10]))
         return None
+    files = {n: masks_dir / f"{n}.png" for n in names}
+    empty = [f.name for f in files.values() if not read_mask(f, size).any()]
+    if empty:
+        raise InputError(f"{len(empty)} of {len(files)} masks are empty (no object pixel): {', '.join(empty[:10])}"
+                         + (" ..." if len(empty) > 10 else ""), masks_dir,
+                         fix="draw the object white (non-zero) on them, or set poses.use_masks=false to pose the "
+                         "photos without masks")
     log.info("object masks from %s: features on the object are ignored", masks_dir)
-    return {n: masks_dir / f"{n}.png" for n in names}
+    return files
 
 
 def _hull_masks(files: dict[str, Path], posed: Posed, und: UndistortMaps | None, size: tuple[int, int],
