@@ -52,7 +52,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary file path beside ``path``; rename it onto ``path`` only if the block succeeds."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp" + path.suffix, dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=_temporary_prefix(path.name), suffix=".tmp" + path.suffix, dir=path.parent)
     os.close(fd)
     tmp = Path(tmp)
     _as_if_created(tmp, 0o666)
@@ -107,6 +107,22 @@ def remove_stale_temporaries(path: str | Path) -> list[Path]:
     if removed:
         log.info("removed %d temporary folder(s) an interrupted run left beside %s: %s", len(removed), path,
                  ", ".join(p.name for p in removed))
+    return removed
+
+
+def remove_stale_temporary_files(folder: str | Path) -> list[Path]:
+    """Remove the temporary files (:func:`atomic_path`'s) that killed runs left in ``folder``; those of writers
+    still running on this machine, or of other machines, are kept."""
+    folder = Path(folder)
+    pattern = re.compile(r"^\..+\.(?P<host>\w+)-(?P<pid>\d+)\.[^.]+\.tmp(\.\w+)?$")
+    removed = []
+    for entry in folder.iterdir() if folder.is_dir() else ():
+        m = pattern.match(entry.name)
+        if m and entry.is_file() and m["host"] == _HOST and not _alive(int(m["pid"])):
+            entry.unlink(missing_ok=True)
+            removed.append(entry)
+    if removed:
+        log.info("removed %d temporary file(s) an interrupted run left in %s", len(removed), folder)
     return removed
 
 

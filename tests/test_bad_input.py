@@ -169,6 +169,24 @@ def test_a_stage_removes_the_temporary_folders_killed_runs_left(tiny_capture, tm
     assert live.is_dir() and other.is_dir()
 
 
+def test_train_removes_a_checkpoint_cut_short_by_sigkill(tiny_capture, tiny_decode, tmp_path):
+    """Item 4, files: a checkpoint being written when SIGKILL came stays as a hidden temporary file."""
+    import socket
+
+    from pipeline.config import load_config
+    from pipeline.stages.train import checkpoint_dir_for, run_train
+
+    gt = tiny_capture / "ground_truth"
+    out = tmp_path / "train"
+    cfg = load_config(preset="fast", overrides=TINY_TRAIN).train
+    run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, cfg, max_steps=2)
+    host = socket.gethostname().split(".")[0].replace("-", "_")
+    cut = checkpoint_dir_for(out) / f".step_0000004.pt.{host}-{2**22 + 12345}.k3j9.tmp.pt"
+    cut.write_bytes(b"half a checkpoint")
+    assert run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, cfg) is not None
+    assert not cut.exists()
+
+
 # ---------------------------------------------------------------- signals: SIGTERM, stale temporary folders
 
 # `orca ARGS` in which the function ``module:name`` (``sys.argv[1:3]``) touches the file ``sys.argv[3]`` and

@@ -24,7 +24,15 @@ from typing import Any
 
 import numpy as np
 
-from ..artifacts import atomic_dir, atomic_path, check_output_dir, remove_stale_temporaries, write_json, write_manifest
+from ..artifacts import (
+    atomic_dir,
+    atomic_path,
+    check_output_dir,
+    remove_stale_temporaries,
+    remove_stale_temporary_files,
+    write_json,
+    write_manifest,
+)
 from ..cameras import load_cameras
 from ..config import TrainConfig, add_config_arguments, config_from_arguments
 from ..errors import InputError, OrcaError
@@ -405,6 +413,7 @@ def run_train(
     check_output_dir(out_dir, "train", sources)  # before hours of training, not after
     capture = common_capture(sources, force=force)
     remove_stale_temporaries(out_dir)
+    remove_stale_temporary_files(ckpt_dir)  # a checkpoint cut short by SIGKILL
     device = resolve_device(cfg.device)
     torch.manual_seed(cfg.seed)
     data, names = load_image_set(decode_dir, cameras_path, masks_dir, points_dir, cfg.depth_object_margin_px)
