@@ -26,15 +26,10 @@ import torch  # noqa: E402
 
 from orca.rays import camera_rays  # noqa: E402
 from pipeline.imageio import read_exr  # noqa: E402
+from pipeline.metrics import psnr_linear  # noqa: E402
 from pipeline.stages.train import load_image_set, load_model  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
-
-
-def psnr(a: np.ndarray, b: np.ndarray) -> float:
-    """PSNR of linear radiance clipped to the sensor's [0, 1], peak 1."""
-    mse = float(np.mean((np.clip(a, 0, 1) - np.clip(b, 0, 1)) ** 2))
-    return float("inf") if mse == 0 else -10 * np.log10(mse)
 
 
 def main() -> None:
@@ -75,7 +70,8 @@ def main() -> None:
         if reference is None:
             reference = spec
         rows.append({"cone_samples": k, "every_sample": k == samples, "ms_per_1k_rays": 1e3 * seconds / args.rays * 1e3,
-                     "specular_psnr_vs_gt": psnr(spec, target), "specular_psnr_vs_every_sample": psnr(spec, reference)})
+                     "specular_psnr_vs_gt": psnr_linear(spec, target),
+                     "specular_psnr_vs_every_sample": psnr_linear(spec, reference)})
         r = rows[-1]
         print(f"k={k:3d}{' (every sample)' if r['every_sample'] else '':15s} {r['ms_per_1k_rays']:8.1f} ms/1k rays  "
               f"specular PSNR vs GT {r['specular_psnr_vs_gt']:.2f} dB, "

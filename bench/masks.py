@@ -21,7 +21,7 @@ import numpy as np
 
 from pipeline.config import load_config
 from pipeline.imageio import read_image
-from pipeline.silhouette import iou
+from pipeline.metrics import iou
 from pipeline.stages.masks import run_masks
 
 

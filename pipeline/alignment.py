@@ -1,15 +1,22 @@
 """Similarity alignment of point sets and camera poses (Umeyama), and the errors measured after it.
 
 Used by the poses stage (to report how well known or refined cameras agree) and by ``orca evaluate``
-(poses against ground truth, which live in different frames). A similarity ``(s, R, t)`` maps a point
-``x`` to ``s * R @ x + t``; as a 4x4 matrix it is ``[[s R, t], [0, 1]]``.
+(a model's frame against the ground truth's: poses, and the frame its renders are moved by). A similarity
+``(s, R, t)`` maps a point ``x`` to ``s * R @ x + t``; as a 4x4 matrix it is ``[[s R, t], [0, 1]]``.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+from .errors import InputError
+
+if TYPE_CHECKING:
+    from .cameras import CameraSet
 
 
 @dataclass(frozen=True)
@@ -29,10 +36,24 @@ class Similarity:
         return m
 
     @classmethod
+    def identity(cls) -> Similarity:
+        return cls(1.0, np.eye(3), np.zeros(3))
+
+    @classmethod
     def from_matrix(cls, m: np.ndarray) -> Similarity:
+        """The similarity of a ``(4, 4)`` matrix; an InputError when it is not one (not finite, last row not
+        0 0 0 1, a reflection, or a 3x3 part that is not a scaled rotation)."""
         m = np.asarray(m, dtype=np.float64)
-        scale = float(np.cbrt(np.linalg.det(m[:3, :3])))
-        return cls(scale, m[:3, :3] / scale, m[:3, 3].copy())
+        if m.shape != (4, 4) or not np.isfinite(m).all() or not np.allclose(m[3], [0, 0, 0, 1]):
+            raise InputError(f"expected a finite 4x4 similarity with last row 0 0 0 1, got {m.shape}")
+        det = np.linalg.det(m[:3, :3])
+        if det <= 0:
+            raise InputError("the 4x4 similarity is a reflection or degenerate (det <= 0)")
+        scale = float(np.cbrt(det))
+        rotation = m[:3, :3] / scale
+        if not np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-5):
+            raise InputError("not a similarity: the 3x3 part of the 4x4 matrix is not a scaled rotation")
+        return cls(scale, rotation, m[:3, 3].copy())
 
     def inverse(self) -> Similarity:
         r_inv = self.rotation.T
@@ -50,6 +71,18 @@ class Similarity:
         out[..., :3, :3] = self.rotation @ c2w[..., :3, :3]
         out[..., :3, 3] = self.apply(c2w[..., :3, 3])
         return out
+
+    def apply_inverse_c2w(self, c2w: np.ndarray) -> np.ndarray:
+        """A ``(4, 4)`` rigid camera-to-world matrix of the target frame -> the same camera in the source frame
+        (rotation ``R^T R_c``, centre ``R^T (c - t) / s``)."""
+        out = np.eye(4)
+        out[:3, :3] = self.rotation.T @ c2w[:3, :3]
+        out[:3, 3] = self.rotation.T @ (c2w[:3, 3] - self.translation) / self.scale
+        return out
+
+    def rotate(self, vectors: np.ndarray) -> np.ndarray:
+        """``(..., 3)`` directions (normals) -> the target frame's: the rotation alone."""
+        return vectors @ self.rotation.T
 
 
 def fit_similarity(src: np.ndarray, dst: np.ndarray, *, with_scale: bool = True) -> Similarity:
@@ -146,3 +179,49 @@ def compare_poses(c2w_est: np.ndarray, c2w_ref: np.ndarray, *, rotation_from: st
     aligned = sim.apply_c2w(c2w_est)
     rel = np.swapaxes(aligned[:, :3, :3], -1, -2) @ c2w_ref[:, :3, :3]
     return PoseErrors(sim, rotation_angle_deg(rel), np.linalg.norm(aligned[:, :3, 3] - c2w_ref[:, :3, 3], axis=-1))
+
+
+def align_cameras(result: CameraSet, truth: CameraSet, centre: np.ndarray | None = None,
+                  result_path: Path | None = None) -> tuple[Similarity, dict[str, Any]]:
+    """The similarity result frame -> reference frame fitted on the centres of the cameras both hold (matched
+    by name; Umeyama), and the pose errors left after it.
+
+    Args:
+        centre: the object centre in the reference frame (the orbit radius is measured from it);
+            default: the mean of the reference camera centres.
+        result_path: the result's cameras.json, named in errors.
+    Returns:
+        the similarity and a JSON-ready report: ``summary`` (medians, means, maxima; centre errors also in %
+        of the orbit radius: the reference cameras' median distance from ``centre``), ``per_camera``,
+        ``missing`` (reference cameras the result lacks, e.g. photos SfM did not register: not counted).
+    """
+    ours, theirs = result.by_name(), truth.by_name()
+    common = [n for n in theirs if n in ours]
+    missing = [n for n in theirs if n not in ours]
+    if len(common) < 3:
+        raise InputError(f"only {len(common)} camera name(s) in common with the ground truth; aligning the frames "
+                         "needs 3 or more", result_path,
+                         "pass the cameras.json the model was trained with (the poses stage's), whose names are the "
+                         "photos' names")
+    est = np.stack([ours[n].c2w for n in common])
+    ref = np.stack([theirs[n].c2w for n in common])
+    try:
+        errors = compare_poses(est, ref)
+    except ValueError as e:
+        raise InputError(f"cannot align the cameras to the ground truth: {e}", result_path) from e
+    centres = np.stack([c.center for c in truth.cameras])
+    centre = centres.mean(0) if centre is None else np.asarray(centre, np.float64)
+    orbit = float(np.median(np.linalg.norm(centres - centre, axis=1)))
+    summary = errors.summary(scale=orbit)
+    summary = {k: v for k, v in summary.items() if not k.endswith("_fraction")}
+    summary.update(center_median_percent=100 * float(np.median(errors.center)) / orbit,
+                   center_max_percent=100 * float(errors.center.max()) / orbit, orbit_radius=orbit,
+                   cameras=len(common), missing=len(missing), scale=errors.similarity.scale)
+    report = {
+        "summary": summary,
+        "per_camera": {n: {"rotation_deg": float(r), "center": float(c), "center_percent": 100 * float(c) / orbit}
+                       for n, r, c in zip(common, errors.rotation_deg, errors.center, strict=True)},
+        "missing": missing, "to_ground_truth": errors.similarity.matrix.tolist(),
+        "method": "Umeyama similarity on camera centres (result -> ground truth), then per-camera errors",
+    }
+    return errors.similarity, report

@@ -6,6 +6,7 @@ the top-left corner of the image, so the centre of the top-left pixel is (0.5, 0
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -218,3 +219,22 @@ def intrinsics_from_fov(width: int, height: int, fov_x_deg: float) -> tuple[floa
     """(fx, fy, cx, cy) of a centred pinhole with horizontal field of view ``fov_x_deg``, square pixels."""
     fx = 0.5 * width / np.tan(np.deg2rad(fov_x_deg) / 2)
     return float(fx), float(fx), width / 2.0, height / 2.0
+
+
+def select_views(names: Sequence[str], views: int | Sequence[str] | None) -> list[str]:
+    """``None``: every view; an int N: N evenly spaced views (first and last included); names: those."""
+    names = list(names)
+    if views is None:
+        return names
+    if isinstance(views, int):
+        if views < 1:
+            raise InputError(f"--views must be at least 1, got {views}")
+        if views >= len(names):
+            return names
+        idx = np.round(np.linspace(0, len(names) - 1, views)).astype(int)
+        return [names[i] for i in dict.fromkeys(idx.tolist())]
+    unknown = [v for v in views if v not in names]
+    if unknown:
+        raise InputError(f"unknown view(s) {', '.join(unknown)}; the ground truth has {', '.join(names[:8])}"
+                         + (" ..." if len(names) > 8 else ""))
+    return list(views)

@@ -68,6 +68,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from .metrics import iou
 from .object_frame import camera_up, pixels_of
 
 log = logging.getLogger("orca.masks")
@@ -761,12 +762,6 @@ def occluded_region(hull: np.ndarray, colour: np.ndarray, swept: np.ndarray | No
         return out
     touched = np.unique(labels[(cv2.dilate(swept.astype(np.uint8), _disc(2)) > 0) & candidates])
     return np.isin(labels, touched[touched > 0])
-
-
-def iou(a: np.ndarray, b: np.ndarray) -> float:
-    """Intersection over union of two bool masks (1 when both are empty)."""
-    union = int(np.count_nonzero(a | b))
-    return float(np.count_nonzero(a & b)) / union if union else 1.0
 
 
 # -------------------------------------------------------------------------------------------- the driver

@@ -19,6 +19,7 @@ from pipeline.dng import (
     simulate_raw,
     write_dng,
 )
+from pipeline.metrics import psnr
 
 
 def colourful(h: int = 96, w: int = 128) -> np.ndarray:
@@ -33,11 +34,6 @@ def colourful(h: int = 96, w: int = 128) -> np.ndarray:
         a = 1.0 / (1.0 + np.exp((np.sqrt(d2) - r * w) / 1.5))  # soft edge, ~1.5 px
         img = img * (1 - a[..., None]) + a[..., None] * np.array(colour)
     return img.astype(np.float32)
-
-
-def psnr(a: np.ndarray, b: np.ndarray, peak: float = 1.0) -> float:
-    mse = float(np.mean((np.asarray(a, np.float64) - b) ** 2))
-    return float("inf") if mse == 0 else float(10 * np.log10(peak**2 / mse))
 
 
 EXP = Exposure(shutter_s=1 / 100, iso=100, f_number=4.0)

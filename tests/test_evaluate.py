@@ -9,25 +9,22 @@ import math
 import numpy as np
 import pytest
 
+from pipeline.alignment import Similarity
+from pipeline.cameras import select_views
+from pipeline.downscale import block_mean, downscale_depth
 from pipeline.errors import InputError
-from pipeline.stages.evaluate import (
+from pipeline.figures import percentile_peak
+from pipeline.metrics import (
     PSNR_CAP_DB,
-    Alignment,
-    Prop,
-    block_mean,
     depth_errors,
-    downscale_depth,
-    mask_iou,
-    masked_psnr,
-    masked_psnr_linear,
-    masked_psnr_srgb,
-    masked_ssim,
+    iou,
     normal_angular_error,
-    percentile_peak,
-    points_from_depth,
-    points_in_props,
-    select_views,
+    psnr,
+    psnr_linear,
+    psnr_srgb,
+    ssim,
 )
+from pipeline.props import Prop, points_from_depth, points_in_props
 
 RNG = np.random.default_rng(0)
 
@@ -45,8 +42,8 @@ def _image(h=32, w=40):
 def test_identical_images_score_the_cap_and_ssim_one():
     img = _image()
     mask = np.ones(img.shape[:2], bool)
-    assert masked_psnr(img, img, mask, 1.0) == pytest.approx(PSNR_CAP_DB)
-    assert masked_ssim(img, img, mask, 1.0) == pytest.approx(1.0, abs=1e-6)
+    assert psnr(img, img, mask, 1.0) == pytest.approx(PSNR_CAP_DB)
+    assert ssim(img, img, mask, 1.0) == pytest.approx(1.0, abs=1e-6)
 
 
 def test_psnr_of_known_noise():
@@ -56,9 +53,9 @@ def test_psnr_of_known_noise():
     mask = np.ones(img.shape[:2], bool)
     mse = np.mean((noisy - img).astype(np.float64) ** 2)
     expected = 10 * math.log10(1.0 / sigma**2)
-    assert masked_psnr(noisy, img, mask, 1.0) == pytest.approx(expected, abs=0.1)
-    assert masked_psnr(noisy, img, mask, 2.0) == pytest.approx(10 * math.log10(4.0 / mse), abs=1e-6)
-    assert masked_ssim(noisy, img, mask, 1.0) < 0.99
+    assert psnr(noisy, img, mask, 1.0) == pytest.approx(expected, abs=0.1)
+    assert psnr(noisy, img, mask, 2.0) == pytest.approx(10 * math.log10(4.0 / mse), abs=1e-6)
+    assert ssim(noisy, img, mask, 1.0) < 0.99
 
 
 def test_psnr_and_ssim_count_only_masked_pixels():
@@ -67,10 +64,10 @@ def test_psnr_and_ssim_count_only_masked_pixels():
     bad[:, 20:] = 0.0  # wrong outside the mask only
     mask = np.zeros(img.shape[:2], bool)
     mask[8:24, 2:12] = True  # 8+ pixels from the damage: the SSIM window (sigma 1.5) does not reach it
-    assert masked_psnr(bad, img, mask, 1.0) == pytest.approx(PSNR_CAP_DB)
-    assert masked_ssim(bad, img, mask, 1.0) == pytest.approx(1.0, abs=1e-6)
-    assert math.isnan(masked_psnr(img, img, np.zeros_like(mask), 1.0)), "empty mask: undefined, not perfect"
-    assert masked_psnr(bad, img, ~mask, 1.0) < 20
+    assert psnr(bad, img, mask, 1.0) == pytest.approx(PSNR_CAP_DB)
+    assert ssim(bad, img, mask, 1.0) == pytest.approx(1.0, abs=1e-6)
+    assert math.isnan(psnr(img, img, np.zeros_like(mask), 1.0)), "empty mask: undefined, not perfect"
+    assert psnr(bad, img, ~mask, 1.0) < 20
 
 
 def test_sensor_psnrs_clip_highlights_and_the_raw_psnr_does_not():
@@ -79,12 +76,12 @@ def test_sensor_psnrs_clip_highlights_and_the_raw_psnr_does_not():
     gt[10, 10] = pred[10, 10] = 0.5
     gt[5, 5], pred[5, 5] = 8.0, 2.0  # a light source: both above the white level
     mask = np.ones(gt.shape[:2], bool)
-    assert masked_psnr_srgb(pred, gt, mask) == pytest.approx(PSNR_CAP_DB), "both clip to white: no visible error"
-    assert masked_psnr(pred, gt, mask) == pytest.approx(10 * math.log10(1 / (36 * 3 / gt.size)), abs=1e-4)
-    assert masked_psnr_linear(pred, gt, mask) == pytest.approx(PSNR_CAP_DB), "the sensor saw white in both"
+    assert psnr_srgb(pred, gt, mask) == pytest.approx(PSNR_CAP_DB), "both clip to white: no visible error"
+    assert psnr(pred, gt, mask) == pytest.approx(10 * math.log10(1 / (36 * 3 / gt.size)), abs=1e-4)
+    assert psnr_linear(pred, gt, mask) == pytest.approx(PSNR_CAP_DB), "the sensor saw white in both"
     worse = pred.copy()
     worse[10, 10] = 0.25
-    assert masked_psnr_srgb(worse, gt, mask) < 60
+    assert psnr_srgb(worse, gt, mask) < 60
 
 
 def test_percentile_peak_for_pictures():
@@ -95,7 +92,7 @@ def test_percentile_peak_for_pictures():
 
 def test_ssim_works_on_tiny_images():
     img = _image(4, 6)
-    assert masked_ssim(img, img, np.ones((4, 6), bool), 1.0) == pytest.approx(1.0, abs=1e-6)
+    assert ssim(img, img, np.ones((4, 6), bool), 1.0) == pytest.approx(1.0, abs=1e-6)
 
 
 def _rotate_about_z(v, deg):
@@ -124,8 +121,8 @@ def test_mask_iou():
     b = np.zeros((10, 10), bool)
     a[:, :6] = True
     b[:, 4:] = True
-    assert mask_iou(a, b) == pytest.approx(20 / 100)
-    assert mask_iou(a, a) == 1.0
+    assert iou(a, b) == pytest.approx(20 / 100)
+    assert iou(a, a) == 1.0
 
 
 def test_depth_scaled_by_1_1_has_absrel_0_1():
@@ -190,18 +187,18 @@ def test_alignment_moves_cameras_into_the_model_frame():
     s, t = 2.5, np.array([0.3, -1.0, 2.0])
     m = np.eye(4)
     m[:3, :3], m[:3, 3] = s * r, t
-    align = Alignment.from_matrix(m)
+    align = Similarity.from_matrix(m)
     c2w_gt = look_at(np.array([3.0, 1.0, 2.0]), np.zeros(3))
-    c2w_model = align.camera_to_model(c2w_gt)
+    c2w_model = align.apply_inverse_c2w(c2w_gt)
     assert np.allclose(c2w_model[:3, :3].T @ c2w_model[:3, :3], np.eye(3)), "still rigid"
     # a point 2 model units in front of the model camera is 2 * s in front of the ground-truth one
     p_model = c2w_model[:3, 3] + 2 * c2w_model[:3, 2]
     p_gt = m[:3, :3] @ p_model + t
-    assert np.allclose(p_gt, c2w_gt[:3, 3] + align.depth_to_ground_truth(2.0) * c2w_gt[:3, 2])
-    assert np.allclose(align.normals_to_ground_truth(c2w_model[:3, 2]), c2w_gt[:3, 2])
-    assert np.allclose(Alignment.from_matrix(None).camera_to_model(c2w_gt), c2w_gt)
+    assert np.allclose(p_gt, c2w_gt[:3, 3] + 2.0 * align.scale * c2w_gt[:3, 2])
+    assert np.allclose(align.rotate(c2w_model[:3, 2]), c2w_gt[:3, 2])
+    assert np.allclose(Similarity.identity().apply_inverse_c2w(c2w_gt), c2w_gt)
     with pytest.raises(InputError, match="similarity"):
-        Alignment.from_matrix(np.diag([1.0, 2.0, 1.0, 1.0]))
+        Similarity.from_matrix(np.diag([1.0, 2.0, 1.0, 1.0]))
 
 
 def test_downscaling_keeps_only_whole_blocks():
@@ -245,11 +242,8 @@ def tiny_train(tiny_capture, tiny_decode, tmp_path_factory):
 
 
 def test_run_evaluate_end_to_end(tiny_capture, tiny_train, tmp_path):
-    from pipeline.stages.evaluate import (
-        ENVIRONMENT_METRICS,
-        OBJECT_METRICS,
-        run_evaluate,
-    )
+    from pipeline.evaluation import ENVIRONMENT_METRICS, OBJECT_METRICS
+    from pipeline.stages.evaluate import run_evaluate
 
     gt = tiny_capture / "ground_truth"
     out = tmp_path / "evaluate"

@@ -14,11 +14,12 @@ import numpy as np
 import pytest
 from tiny_model import orbit_cameras, write_untrained_train_dir
 
-from pipeline.alignment import Similarity
+from pipeline.alignment import Similarity, align_cameras
 from pipeline.cameras import CameraSet, save_cameras
 from pipeline.errors import InputError
 from pipeline.imageio import read_exr, read_image, write_exr, write_png
-from pipeline.stages.evaluate import PSNR_CAP_DB, align_cameras, run_evaluate
+from pipeline.metrics import PSNR_CAP_DB
+from pipeline.stages.evaluate import run_evaluate
 
 
 def _rotation(axis, deg: float) -> np.ndarray:

@@ -18,6 +18,7 @@ from pipeline.config import MasksConfig, PosesConfig
 from pipeline.errors import InputError
 from pipeline.imageio import read_image, write_png
 from pipeline.mask_file import read_mask
+from pipeline.metrics import iou
 from pipeline.silhouette import (
     Plane,
     SegmentOptions,
@@ -30,7 +31,6 @@ from pipeline.silhouette import (
     front_evidence,
     hull_depth,
     hull_grid,
-    iou,
     neighbours,
     pixel_rays,
     plane_homography,

@@ -5,12 +5,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from pipeline.artifacts import read_json
 from pipeline.config import DecodeConfig
 from pipeline.imageio import read_exr
+from pipeline.metrics import psnr
 from pipeline.results import load_decode
 from pipeline.stages.decode import run_decode
 
@@ -40,7 +40,7 @@ def psnr_per_view(capture: Path, decode_dir: Path) -> dict[str, float]:
         truth = read_exr(capture / "ground_truth" / "linear" / f"{name}.exr")[..., :3] * factor
         got = dec.linear(name)
         ok = ~dec.clipped(name) & (truth.max(-1) < 1.0)  # clipped highlights carry no radiance to compare
-        out[name] = float(-10 * np.log10(np.mean((got[ok] - truth[ok]) ** 2)))  # peak 1 = the white level
+        out[name] = psnr(got, truth, ok)  # peak 1 = the white level
     return out
 
 

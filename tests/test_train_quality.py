@@ -15,6 +15,7 @@ from helpers import small
 
 from pipeline.config import DecodeConfig, load_config
 from pipeline.imageio import read_exr, read_image
+from pipeline.metrics import iou
 from pipeline.stages.decode import run_decode
 from pipeline.stages.train import load_image_set, load_model, model_spec, run_train
 
@@ -58,7 +59,7 @@ def shape_errors(model, capture, decode) -> tuple[float, float]:
         p = pred[mask] / np.linalg.norm(pred[mask], axis=-1, keepdims=True).clip(1e-8)
         t = true[mask] / np.linalg.norm(true[mask], axis=-1, keepdims=True)
         errors.append(np.degrees(np.arccos((p * t).sum(-1).clip(-1, 1))))
-        ious.append((opaque & silhouette).sum() / (opaque | silhouette).sum())
+        ious.append(iou(opaque, silhouette))
     return float(np.concatenate(errors).mean()), float(np.mean(ious))
 
 

@@ -47,7 +47,7 @@ from typing import Any
 import numpy as np
 
 from ..artifacts import atomic_dir, read_json, write_json, write_manifest
-from ..cameras import Camera, CameraSet, load_cameras, look_at, save_cameras
+from ..cameras import Camera, CameraSet, load_cameras, look_at, save_cameras, select_views
 from ..config import ExportConfig, add_config_arguments, config_from_arguments
 from ..errors import InputError
 from ..provenance import common_capture
@@ -379,8 +379,6 @@ def run_export(train_dir: Path, out_dir: Path, cfg: ExportConfig | None = None, 
     fly = flythrough_path(cfg, frame)
     object_cams: list[Camera] = []
     if train_cams is not None and cfg.object_views > 0:
-        from .evaluate import select_views
-
         by_name = train_cams.by_name()
         object_cams = [by_name[n] for n in select_views(list(by_name), cfg.object_views)]
     timing: dict[str, float] = {}

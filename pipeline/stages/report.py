@@ -49,6 +49,7 @@ import numpy as np
 
 from ..artifacts import MANIFEST, atomic_dir, read_json, write_manifest
 from ..errors import InputError
+from ..evaluation import metric_rows
 
 log = logging.getLogger("orca.report")
 
@@ -720,13 +721,8 @@ def _view_table(page: Page, folder: Path, names: Sequence[str]) -> str:
 
 
 def _metric_rows(means: dict[str, Any]) -> list[tuple[str, Any, str, str]]:
-    from .evaluate import _LABELS
-
-    rows = []
-    for key, value in means.items():
-        label, unit, better = _LABELS.get(key, (key, "", ""))
-        rows.append((label, value, unit, f"{better} is better" if better else ""))
-    return rows
+    return [(label, value, unit, f"{better} is better" if better else "")
+            for label, value, unit, better in metric_rows(means)]
 
 
 def _evaluated_views(page: Page, folder: Path, part: Any, title: str, grid: str) -> tuple[str, dict[str, Any]]:
