@@ -1,5 +1,6 @@
-"""Rendering whole images from the model: object views (normals, diffuse, specular, combined, mask, depth)
-and environment views from virtual cameras anywhere (RGB + z-depth). Chunked so memory stays bounded."""
+"""Rendering whole images from the model: object views (normals, diffuse, specular, combined, opacity, depth),
+environment views from virtual cameras anywhere (RGB + z-depth), and the object over its environment.
+Chunked so memory stays bounded; no gradients."""
 
 from __future__ import annotations
 
@@ -7,34 +8,71 @@ import torch
 
 from .model import OrcaModel
 from .rays import camera_rays, pixel_centers
+from .sampling import ray_sphere_bounds
+
+OBJECT_KEYS = ("rgb", "diffuse", "specular", "normal", "opacity", "depth")
 
 
-def _rays(K: torch.Tensor, c2w: torch.Tensor, height: int, width: int):
+def image_rays(
+    K: torch.Tensor, c2w: torch.Tensor, height: int, width: int
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Rays through the pixel centres of a pinhole camera, row-major.
+
+    Args:
+        K: ``(3, 3)``; c2w: ``(4, 4)``.
+    Returns:
+        origins ``(H W, 3)``, unit directions ``(H W, 3)``, cone radii ``(H W,)``.
+    """
     uv = pixel_centers(height, width, dtype=K.dtype, device=K.device).reshape(-1, 2)
     return camera_rays(uv, K, c2w)
 
 
-def render_object_image(
-    model: OrcaModel, K: torch.Tensor, c2w: torch.Tensor, height: int, width: int, chunk: int = 4096
+@torch.no_grad()
+def render_object_rays(
+    model: OrcaModel, origins: torch.Tensor, dirs: torch.Tensor, radii: torch.Tensor, chunk: int = 4096,
+    skip_misses: bool = False,
 ) -> dict[str, torch.Tensor]:
-    """Render the object as seen by a pinhole camera.
+    """The object along rays, in chunks.
+
+    Args:
+        origins, dirs: ``(N, 3)``; radii: ``(N,)``.
+        skip_misses: rays that miss the model's bounding sphere (``spec.render.object_radius``) are zeros
+            without being traced. The renderer gives them an empty interval, so this only saves time; but a
+            spec that draws random samples draws fewer of them, which changes every later draw.
+    Returns:
+        ``rgb``, ``diffuse``, ``specular``, ``normal`` ``(N, 3)``; ``opacity`` and ray ``depth`` ``(N,)``.
+    """
+    n = origins.shape[0]
+    out = {k: torch.zeros((n, 3) if k in ("rgb", "diffuse", "specular", "normal") else (n,), device=origins.device)
+           for k in OBJECT_KEYS}
+    if skip_misses:
+        _, _, hit = ray_sphere_bounds(origins, dirs, model.spec.render.object_radius)
+        index = torch.nonzero(hit).squeeze(-1)
+    else:
+        index = torch.arange(n, device=origins.device)
+    for i in range(0, index.numel(), chunk):
+        sl = index[i : i + chunk]
+        r = model(origins[sl], dirs[sl], radii[sl])
+        for key in OBJECT_KEYS:
+            out[key][sl] = getattr(r, key).detach().to(out[key].dtype)
+    return out
+
+
+def render_object_image(
+    model: OrcaModel, K: torch.Tensor, c2w: torch.Tensor, height: int, width: int, chunk: int = 4096,
+    skip_misses: bool = False,
+) -> dict[str, torch.Tensor]:
+    """Render the object as seen by a pinhole camera (``skip_misses``: see :func:`render_object_rays`).
 
     Args:
         K: ``(3, 3)``; c2w: ``(4, 4)``.
     Returns:
         ``rgb``, ``diffuse``, ``specular``, ``normal`` ``(H, W, 3)``; ``opacity``, ``depth`` (z-depth) ``(H, W)``.
     """
-    origins, dirs, radii = _rays(K, c2w, height, width)
-    axis = c2w[:3, 2]
-    parts: dict[str, list[torch.Tensor]] = {k: [] for k in ("rgb", "diffuse", "specular", "normal", "opacity", "depth")}
-    for i in range(0, origins.shape[0], chunk):
-        sl = slice(i, i + chunk)
-        out = model(origins[sl], dirs[sl], radii[sl])
-        zscale = (dirs[sl] * axis).sum(-1)
-        for key in ("rgb", "diffuse", "specular", "normal", "opacity"):
-            parts[key].append(getattr(out, key).detach())
-        parts["depth"].append((out.depth * zscale).detach())
-    return {k: torch.cat(v).reshape(height, width, -1).squeeze(-1) for k, v in parts.items()}
+    origins, dirs, radii = image_rays(K, c2w, height, width)
+    out = render_object_rays(model, origins, dirs, radii, chunk, skip_misses)
+    out["depth"] = out["depth"] * (dirs * c2w[:3, 2]).sum(-1)  # ray distance -> z-depth
+    return {k: v.reshape(height, width, -1).squeeze(-1) for k, v in out.items()}
 
 
 @torch.no_grad()
@@ -43,7 +81,7 @@ def render_environment_image(
 ) -> dict[str, torch.Tensor]:
     """Render the environment field alone (object absent) from any camera: ``rgb`` ``(H, W, 3)`` and
     z-depth ``depth`` ``(H, W)`` along the camera's optical axis."""
-    origins, dirs, radii = _rays(K, c2w, height, width)
+    origins, dirs, radii = image_rays(K, c2w, height, width)
     axis = c2w[:3, 2]
     rgbs, depths = [], []
     for i in range(0, origins.shape[0], chunk):
@@ -52,3 +90,21 @@ def render_environment_image(
         rgbs.append(rgb)
         depths.append(depth * (dirs[sl] * axis).sum(-1))
     return {"rgb": torch.cat(rgbs).reshape(height, width, 3), "depth": torch.cat(depths).reshape(height, width)}
+
+
+@torch.no_grad()
+def render_composite_image(
+    model: OrcaModel, K: torch.Tensor, c2w: torch.Tensor, height: int, width: int, chunk: int = 8192
+) -> torch.Tensor:
+    """What a camera would photograph: the object over the environment field, ``(H, W, 3)`` linear
+    (``rgb + (1 - opacity) * environment``; the environment is traced only where the object lets it through,
+    the object only where rays meet its bounding sphere)."""
+    origins, dirs, radii = image_rays(K, c2w, height, width)
+    obj = render_object_rays(model, origins, dirs, radii, skip_misses=True)
+    rgb = obj["rgb"].clone()
+    through = torch.nonzero(obj["opacity"] < 1 - 1e-3).squeeze(-1)
+    for i in range(0, through.numel(), chunk):
+        sl = through[i : i + chunk]
+        env, _ = model.environment(origins[sl], dirs[sl], radii[sl])
+        rgb[sl] += (1 - obj["opacity"][sl, None]) * env
+    return rgb.reshape(height, width, 3)

@@ -43,7 +43,7 @@ def ground_truth_from_model(train: Path, mesh: Path, out: Path, sim: Similarity 
     import open3d as o3d
 
     from pipeline.config import ExportConfig
-    from pipeline.stages.export import environment_cameras, panorama_frame
+    from pipeline.panorama import environment_cameras, panorama_frame
     from pipeline.stages.render import run_render
 
     sim = sim or Similarity(1.0, np.eye(3), np.zeros(3))

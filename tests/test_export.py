@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.stages.export import (
+from pipeline.panorama import (
     environment_cameras,
     equirect_directions,
     equirect_rays,

@@ -11,7 +11,7 @@ import pytest
 from tiny_model import write_untrained_train_dir
 
 from pipeline.errors import InputError
-from pipeline.stages.mesh import marching_cubes, mesh_properties, to_open3d
+from pipeline.meshing import marching_cubes, mesh_properties, to_open3d
 
 
 def sphere(p: np.ndarray, r: float = 0.7, c=(0.0, 0.0, 0.0)) -> np.ndarray:

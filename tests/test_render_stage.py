@@ -87,7 +87,7 @@ def test_render_refuses_a_downscale_larger_than_a_camera(setup, tmp_path):
 
 
 def test_the_renderer_takes_the_trained_configs_render_settings(setup):
-    from pipeline.stages.render import load_renderer
+    from pipeline.rendering import load_renderer
 
     model = load_renderer(setup[0], "cpu")
     assert model.spec.render.deterministic and model.spec.render.env_fine == 2  # train.env_fine_render (tiny_model)
