@@ -1,5 +1,5 @@
-"""Pictures for people: tile grids of ground truth beside prediction (matplotlib), and the exposure and colour
-scales they are shown with."""
+"""Evaluation pictures: tile grids of ground truth beside prediction (matplotlib), and the exposure they are
+shown with (depth colour scales: :mod:`pipeline.media`, shared with the export's pictures)."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from .media import depth_scale
 from .metrics import PSNR_PEAK, tone_map
 
 DISPLAY_PERCENTILE = 99.0
@@ -36,15 +37,6 @@ def display_peak(image: np.ndarray, mask: np.ndarray, fallback: float) -> float:
 def normals_rgb(normals: np.ndarray) -> np.ndarray:
     """``(H, W, 3)`` normals -> colours ``(n + 1) / 2`` in [0, 1]."""
     return np.clip(normals * 0.5 + 0.5, 0, 1)
-
-
-def depth_scale(depths: Sequence[np.ndarray]) -> tuple[float, float]:
-    """One colour scale for depth pictures: the 1st and 99th percentiles of every finite depth."""
-    finite = np.concatenate([d[np.isfinite(d)].ravel() for d in depths]) if depths else np.zeros(0)
-    if finite.size == 0:
-        return 0.0, 1.0
-    lo, hi = (float(x) for x in np.percentile(finite, [1, 99]))
-    return lo, hi if hi > lo else lo + 1.0
 
 
 def tile_figure(rows: int, columns: int, aspect: float):
@@ -93,8 +85,8 @@ def object_grid(path: Path, rows: Sequence[tuple[str, dict, dict, dict]]) -> Pat
 
 def environment_grid(path: Path, rows: Sequence[tuple[str, dict, dict, dict]]) -> Path:
     """Rows (name, prediction, truth, figures) of GT rgb | predicted rgb | GT depth | predicted depth. All depth
-    tiles share one colour scale (:func:`depth_scale` of every view's ground-truth depth), shown by a colour
-    bar on each row; RGB is tone-mapped with the PSNR peak (as the camera would see it)."""
+    tiles share one colour scale (:func:`pipeline.media.depth_scale` of every view's ground-truth depth), shown
+    by a colour bar on each row; RGB is tone-mapped with the PSNR peak (as the camera would see it)."""
     columns = ["GT rgb", "predicted rgb", "GT depth", "predicted depth"]
     h, w = rows[0][1]["depth"].shape
     fig, axes = tile_figure(len(rows), len(columns), h / w)
