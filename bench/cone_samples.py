@@ -27,7 +27,8 @@ import torch  # noqa: E402
 from orca.rays import camera_rays  # noqa: E402
 from pipeline.imageio import read_exr  # noqa: E402
 from pipeline.metrics import psnr_linear  # noqa: E402
-from pipeline.stages.train import load_image_set, load_model  # noqa: E402
+from pipeline.model_io import load_model  # noqa: E402
+from pipeline.training_data import load_image_set  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 

@@ -27,7 +27,7 @@ from train_speed import synthetic_images  # noqa: E402
 
 from orca.model import Batch, OrcaModel, objective  # noqa: E402
 from pipeline.config import PRESETS, load_config  # noqa: E402
-from pipeline.stages.train import loss_weights, model_spec  # noqa: E402
+from pipeline.model_io import loss_weights, model_spec  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 # float32 on two devices: renders agree to ~1e-5 where nothing is ill-conditioned. A few rays are: in the

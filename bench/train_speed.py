@@ -26,7 +26,7 @@ from orca.data import ImageSet  # noqa: E402
 from orca.model import OrcaModel, objective  # noqa: E402
 from pipeline.cameras import intrinsics_from_fov, look_at  # noqa: E402
 from pipeline.config import PRESETS, load_config  # noqa: E402
-from pipeline.stages.train import loss_weights, model_spec, resolve_device  # noqa: E402
+from pipeline.model_io import loss_weights, model_spec, resolve_device  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 VIEWS, WIDTH, HEIGHT, FOV_DEG, DISTANCE = 16, 320, 240, 40.0, 4.0

@@ -108,9 +108,10 @@ def test_every_superseded_checkpoint_set_is_kept(tiny_capture, tiny_decode, tmp_
 
 def test_shorter_iterations_go_on_from_an_earlier_checkpoint(tiny_capture, tiny_decode, tmp_path, caplog):
     """Item 9: train.iterations below the newest checkpoint's step wrote the longer model ("step 30 of 20")."""
+    from pipeline.checkpoints import load_checkpoint
     from pipeline.config import load_config
     from pipeline.errors import InputError
-    from pipeline.stages.train import checkpoint_dir_for, load_checkpoint, run_train
+    from pipeline.stages.train import checkpoint_dir_for, run_train
 
     gt = tiny_capture / "ground_truth"
     out = tmp_path / "train"
@@ -310,8 +311,9 @@ def test_sigterm_checkpoints_train_with_points_and_a_rerun_resumes(tiny_capture,
     import subprocess
     import sys
 
+    from pipeline.checkpoints import checkpoint_step
     from pipeline.config import load_config
-    from pipeline.stages.train import checkpoint_dir_for, checkpoint_step, run_train
+    from pipeline.stages.train import checkpoint_dir_for, run_train
 
     gt = tiny_capture / "ground_truth"
     points = _colmap_model(gt / "cameras.json", tmp_path / "sparse")
@@ -354,7 +356,7 @@ def test_a_snakemake_run_sigtermed_during_train_resumes_on_rerun(tiny_capture, t
     from test_snakemake import ROOT
     from test_snakemake import TINY_TRAIN as DAG_OVERRIDES
 
-    from pipeline.stages.train import checkpoint_step
+    from pipeline.checkpoints import checkpoint_step
 
     capture = Path(shutil.copytree(tiny_capture, tmp_path / "captures" / "tiny"))
     shutil.copy(capture / "ground_truth" / "cameras.json", capture / "cameras.json")  # as in test_snakemake
@@ -515,7 +517,7 @@ def test_train_refuses_masks_of_another_aspect_ratio_like_the_masks_stage(tiny_c
     from pipeline.errors import InputError
     from pipeline.imageio import read_image, write_png
     from pipeline.mask_file import read_mask
-    from pipeline.stages.train import load_image_set
+    from pipeline.training_data import load_image_set
 
     truth = tiny_capture / "ground_truth"
     names = _names(tiny_capture)

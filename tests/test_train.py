@@ -9,15 +9,12 @@ import numpy as np
 import pytest
 import torch
 
+from pipeline.checkpoints import load_checkpoint
 from pipeline.config import load_config
 from pipeline.errors import InputError
-from pipeline.stages.train import (
-    TrainingDiverged,
-    checkpoint_dir_for,
-    load_checkpoint,
-    load_model,
-    run_train,
-)
+from pipeline.model_io import load_model
+from pipeline.stages.train import checkpoint_dir_for, run_train
+from pipeline.training import TrainingDiverged
 
 # A few steps of a very small model: what is tested is the bookkeeping, not the quality.
 TINY = [
@@ -133,7 +130,8 @@ def test_damaged_checkpoint_names_the_file(tmp_path):
 
 def test_weights_of_another_network_version_are_a_clear_error(tmp_path):
     from orca.model import OrcaModel
-    from pipeline.stages.train import load_weights, model_spec
+    from pipeline.checkpoints import load_weights
+    from pipeline.model_io import model_spec
 
     model = OrcaModel(model_spec(_cfg()))
     state = {"model": {k: v for k, v in model.state_dict().items() if "level_weights" not in k}}
@@ -179,7 +177,7 @@ def test_training_lowers_the_loss_on_the_tiny_capture(tiny_capture, tiny_decode,
 @pytest.mark.slow
 def test_the_poses_stages_points_give_sparse_depth(sfm_sphere_capture, sfm_sphere_decode, sfm_sphere_poses, tmp_path):
     """`--points`: the SfM points of the room, off the object, become rays whose depth the field is taught."""
-    from pipeline.stages.train import load_image_set
+    from pipeline.training_data import load_image_set
 
     _, poses, _ = sfm_sphere_poses
     masks = sfm_sphere_capture / "ground_truth" / "masks"

@@ -16,8 +16,10 @@ from helpers import small
 from pipeline.config import DecodeConfig, load_config
 from pipeline.imageio import read_exr, read_image
 from pipeline.metrics import iou
+from pipeline.model_io import load_model, model_spec
 from pipeline.stages.decode import run_decode
-from pipeline.stages.train import load_image_set, load_model, model_spec, run_train
+from pipeline.stages.train import run_train
+from pipeline.training_data import load_image_set
 
 pytest.importorskip("mitsuba")
 
@@ -66,7 +68,7 @@ def shape_errors(model, capture, decode) -> tuple[float, float]:
 def held_out_losses(model, capture, decode, cfg) -> dict[str, float]:
     """The objective's terms on one fixed batch of 4096 rays (per-step batches are too noisy to compare)."""
     from orca.model import objective
-    from pipeline.stages.train import loss_weights
+    from pipeline.model_io import loss_weights
 
     gt = capture / "ground_truth"
     data, _ = load_image_set(decode, gt / "cameras.json", gt / "masks")
