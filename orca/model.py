@@ -174,7 +174,7 @@ def objective(
         "eikonal": eikonal_loss(out.sdf_grad),
     }
     if phase == "joint":
-        normals = torch.nn.functional.normalize(out.sdf_grad, dim=-1)
+        normals = normalize(out.sdf_grad)
         # The surface's colour (radiance per unit opacity): otherwise the quickest way to darken a too-bright
         # start is to thin the surface, and the photometric term fights the silhouettes the mask term learns.
         surface_rgb = out.rgb / out.opacity.clamp_min(_OPACITY_EPS)[:, None]
