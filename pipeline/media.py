@@ -53,6 +53,7 @@ def write_video(path: Path, frames: list[np.ndarray], fps: int) -> Path:
 
 
 def write_environment_view(folder: Path, name: str, view: dict[str, np.ndarray], scale: tuple[float, float]) -> None:
+    """``<name>_rgb.exr``, ``_depth.exr``, ``_rgb.png`` (sRGB) and ``_depth.png`` (turbo on ``scale``)."""
     write_exr(folder / f"{name}_rgb.exr", view["rgb"].astype(np.float32))
     write_exr(folder / f"{name}_depth.exr", view["depth"].astype(np.float32))
     write_png(folder / f"{name}_rgb.png", to_srgb8(view["rgb"]))
@@ -60,6 +61,7 @@ def write_environment_view(folder: Path, name: str, view: dict[str, np.ndarray],
 
 
 def write_point_cloud(path: Path, points: np.ndarray, colors: np.ndarray, transform: np.ndarray | None = None) -> Path:
+    """Points ``(N, 3)`` with colours ``(N, 3)`` in [0, 1] as a binary PLY, moved by the 4x4 ``transform``."""
     import open3d as o3d
 
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))

@@ -7,6 +7,7 @@ the renderer gives them an empty interval anyway, and on a photo the object fill
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -29,8 +30,6 @@ def load_renderer(train_dir: Path, device: str = "auto"):
     """The trained model of ``train_dir`` ready to render: eval mode, the render spec's ``for_rendering`` (a
     view rendered twice, or by two stages, is the same image; training draws random quantiles, rendering
     must not)."""
-    from dataclasses import replace
-
     model = load_model(train_dir, str(resolve_device(device)))
     model.spec = replace(model.spec, render=model.spec.render.for_rendering())
     return model

@@ -22,6 +22,7 @@ from typing import Any
 from ..artifacts import atomic_dir, write_manifest
 from ..cameras import CameraSet, load_cameras, save_cameras
 from ..errors import InputError
+from ..log import progress
 from ..model_io import FINAL_WEIGHTS
 from ..provenance import common_capture
 from ..rendering import (
@@ -40,8 +41,6 @@ def run_render(
     device: str = "auto",
 ) -> Path:
     """Render every camera of ``cameras_path`` with the model of ``train_dir`` into ``out_dir`` (atomically)."""
-    from ..log import progress
-
     started = time.time()
     if downscale < 1:
         raise InputError(f"downscale must be >= 1, got {downscale}")
