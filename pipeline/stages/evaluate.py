@@ -44,9 +44,10 @@ from ..figures import environment_grid, object_grid
 from ..ground_truth import GroundTruth, resolve_ground_truth
 from ..log import console, progress
 from ..metrics import mesh_errors
+from ..model_io import FINAL_WEIGHTS
 from ..props import PROP_MARGIN
 from ..provenance import FORCE_HELP, common_capture
-from .render import render_environment_view, render_object_view, write_views
+from ..rendering import load_renderer, render_environment_view, render_object_view, write_views
 
 log = logging.getLogger("orca.evaluate")
 
@@ -141,9 +142,6 @@ def run_evaluate(
     Returns:
         The content of ``evaluate.json`` (NaN written as null).
     """
-    from .render import load_renderer
-    from .train import FINAL_WEIGHTS
-
     started = time.time()
     train_dir, out_dir = Path(train_dir), Path(out_dir)
     if not object and not environment:
