@@ -17,12 +17,18 @@ Config keys (all optional): captures (list of folder names under captures_dir), 
 preset (fast | standard | paper), set (a list of config overrides, e.g. '["train.iterations=500"]').
 """
 
+import os
 import shlex
 import sys
 from pathlib import Path
 
+from pipeline import layout
+from pipeline.cameras import load_cameras
 from pipeline.config import PRESETS, stage_config_digest
-from pipeline.stages.decode import find_photos
+from pipeline.photos import find_photos
+from pipeline.results import image_folder
+
+# ------------------------------------------------------------------------------------------------- config
 
 # The `orca` CLI of the environment Snakemake itself runs in (no need for it to be on PATH).
 ORCA = f"{shlex.quote(sys.executable)} -m pipeline.cli"
@@ -36,7 +42,7 @@ CAPTURES = config.get("captures", ["demo"])
 if isinstance(CAPTURES, str):
     CAPTURES = [CAPTURES]
 CAPTURES_DIR = Path(config.get("captures_dir", "captures"))
-RESULTS_DIR = Path(config.get("results_dir", "results"))
+RESULTS_DIR = Path(config.get("results_dir", str(layout.RESULTS)))
 PRESET = config.get("preset", "fast")
 # Config overrides for every stage, as `orca <stage> --set`: --config set='["train.iterations=500"]'
 OVERRIDES = config.get("set", [])
@@ -53,9 +59,30 @@ for name in CAPTURES:
         raise ValueError(f"capture folder {CAPTURES_DIR / name} does not exist (config 'captures').{hint}")
 
 
+def out(stage):
+    """A stage's folder of the capture (the wildcard)."""
+    return RESULTS_DIR / "{capture}" / stage
+
+
+def log_of(stage):
+    return RESULTS_DIR / "{capture}" / layout.LOGS / f"{stage}.log"
+
+
+def has_ground_truth(capture):
+    return (CAPTURES_DIR / capture / layout.GROUND_TRUTH / layout.SCENE_JSON).is_file()
+
+
+# ---------------------------------------------------------------------------------------- input functions
+
+
+def photos(wildcards):
+    """The capture's photos, as the decode stage finds them: a new or edited photo reruns everything."""
+    return [str(p) for p in find_photos(CAPTURES_DIR / wildcards.capture)[1]]
+
+
 def capture_config(wildcards):
     """The capture's own capture.yaml, when it has one: editing it reruns the stages."""
-    path = CAPTURES_DIR / wildcards.capture / "capture.yaml"
+    path = CAPTURES_DIR / wildcards.capture / layout.CAPTURE_YAML
     return [str(path)] if path.exists() else []
 
 
@@ -64,65 +91,57 @@ def config_digest(section, reads_capture_yaml=True):
     a rule whose params changed, so an upgrade that changes a default (or an edited preset) reruns the stages
     it touches, which neither the files nor the command line would show."""
     def digest(wildcards):
-        capture_yaml = CAPTURES_DIR / wildcards.capture / "capture.yaml" if reads_capture_yaml else None
+        capture_yaml = CAPTURES_DIR / wildcards.capture / layout.CAPTURE_YAML if reads_capture_yaml else None
         return stage_config_digest(section, PRESET, OVERRIDES, capture_yaml)
     return digest
-
-
-def user_masks(wildcards):
-    """The capture's own masks/ folder (the user's masks, for all or some photos), when it has one: the masks
-    stage uses them instead of its automatic ones, and editing them reruns it."""
-    path = CAPTURES_DIR / wildcards.capture / "masks"
-    return {"user_masks": str(path)} if path.is_dir() else {}
 
 
 def poses_inputs(wildcards):
     """What the poses stage reads from the capture when present: a calibration, its own cameras, masks."""
     capture = CAPTURES_DIR / wildcards.capture
     found = {}
-    for key, rel in (("calibration", "calibration/calibration.json"), ("cameras", "cameras.json"),
-                     ("transforms", "transforms.json"), ("masks", "masks")):
+    for key, rel in (("calibration", layout.CALIBRATION), ("cameras", layout.CAMERAS_JSON),
+                     ("transforms", layout.TRANSFORMS_JSON), ("masks", layout.USER_MASKS)):
         if (capture / rel).exists():
             found[key] = str(capture / rel)
     return found
 
 
-def has_ground_truth(capture):
-    return (CAPTURES_DIR / capture / "ground_truth" / "scene.json").is_file()
-
-
-REPORTED_STAGES = ["decode", "poses", "masks", "train", "mesh", "export"]
+def user_masks(wildcards):
+    """The capture's own masks/ folder (the user's masks, for all or some photos), when it has one: the masks
+    stage uses them instead of its automatic ones, and editing them reruns it."""
+    path = CAPTURES_DIR / wildcards.capture / layout.USER_MASKS
+    return {"user_masks": str(path)} if path.is_dir() else {}
 
 
 def report_inputs(wildcards):
     """Every stage's folder of the capture, evaluate's only when the capture has ground truth: the report shows
     them all, and is redone when any of them changes."""
-    stages = REPORTED_STAGES + (["evaluate"] if has_ground_truth(wildcards.capture) else [])
+    stages = [s for s in layout.STAGES if s != layout.EVALUATE or has_ground_truth(wildcards.capture)]
     return {stage: str(RESULTS_DIR / wildcards.capture / stage) for stage in stages}
+
+
+# ------------------------------------------------------------------------------------------------- rules
 
 
 rule all:
     input:
-        expand(RESULTS_DIR / "{capture}" / "poses", capture=CAPTURES),
-        expand(RESULTS_DIR / "{capture}" / "masks", capture=CAPTURES),
-        expand(RESULTS_DIR / "{capture}" / "train", capture=CAPTURES),
-        expand(RESULTS_DIR / "{capture}" / "mesh", capture=CAPTURES),
-        expand(RESULTS_DIR / "{capture}" / "export", capture=CAPTURES),
-        [RESULTS_DIR / c / "evaluate" for c in CAPTURES if has_ground_truth(c)],
-        expand(RESULTS_DIR / "{capture}" / "report", capture=CAPTURES),
+        [expand(out(s), capture=CAPTURES) for s in layout.STAGES if s not in (layout.DECODE, layout.EVALUATE)],
+        [RESULTS_DIR / c / layout.EVALUATE for c in CAPTURES if has_ground_truth(c)],
+        expand(out(layout.REPORT), capture=CAPTURES),
 
 
 rule decode:
     """Photos (RAW or JPEG/PNG/TIFF) -> linear exposure-normalized EXR, sRGB PNG, clipped masks."""
     input:
-        photos=lambda wc: [str(p) for p in find_photos(CAPTURES_DIR / wc.capture)[1]],
+        photos=photos,
         capture_yaml=capture_config,
     params:
         config=config_digest("decode"),
     output:
-        directory(RESULTS_DIR / "{capture}" / "decode"),
+        directory(out(layout.DECODE)),
     log:
-        RESULTS_DIR / "{capture}" / "logs" / "decode.log",
+        log_of(layout.DECODE),
     shell:
         "{ORCA} decode {CAPTURES_DIR}/{wildcards.capture} --out {output} --preset {PRESET} {SET} > {log} 2>&1"
 
@@ -132,14 +151,14 @@ rule poses:
     own cameras.json / transforms.json), transforms.json, sparse/, poses_report.json, poses.png."""
     input:
         unpack(poses_inputs),
-        decode=RESULTS_DIR / "{capture}" / "decode",
+        decode=out(layout.DECODE),
         capture_yaml=capture_config,
     params:
         config=config_digest("poses"),
     output:
-        directory(RESULTS_DIR / "{capture}" / "poses"),
+        directory(out(layout.POSES)),
     log:
-        RESULTS_DIR / "{capture}" / "logs" / "poses.log",
+        log_of(layout.POSES),
     threads: 4
     shell:
         "{ORCA} poses {CAPTURES_DIR}/{wildcards.capture} --decode {input.decode} --out {output} --preset {PRESET} "
@@ -152,15 +171,15 @@ rule masks:
     to the object's tight bounding sphere, overlays, contact sheet, masks_report.json."""
     input:
         unpack(user_masks),
-        decode=RESULTS_DIR / "{capture}" / "decode",
-        poses=RESULTS_DIR / "{capture}" / "poses",
+        decode=out(layout.DECODE),
+        poses=out(layout.POSES),
         capture_yaml=capture_config,
     params:
         config=config_digest("masks"),
     output:
-        directory(RESULTS_DIR / "{capture}" / "masks"),
+        directory(out(layout.MASKS)),
     log:
-        RESULTS_DIR / "{capture}" / "logs" / "masks.log",
+        log_of(layout.MASKS),
     shell:
         "{ORCA} masks {CAPTURES_DIR}/{wildcards.capture} --poses {input.poses} --decode {input.decode} "
         "--out {output} --preset {PRESET} {SET} > {log} 2>&1"
@@ -169,43 +188,47 @@ rule masks:
 rule train:
     """Decoded photos + cameras + masks -> the trained model (SDF, diffuse head, environment field). The cameras
     are the masks stage's (the poses stage's, re-normalized so that the object's tight sphere is the unit
-    sphere), for real and synthetic captures alike: evaluation aligns them to the ground truth. When the poses
-    stage resampled the photos to pinhole (poses/undistorted/), training reads those. Its sparse points
-    (poses/sparse/) give the environment field sparse depth of the surroundings (losses.sparse_depth).
-    Checkpoints go to train.checkpoints/ beside the output, so a killed job resumes where it stopped."""
+    sphere), for real and synthetic captures alike: evaluation aligns them to the ground truth. The images are
+    those the cameras point at: the decoded photos, or the poses stage's poses/undistorted/ when it resampled
+    them to pinhole. Its sparse points (poses/sparse/) give the environment field sparse depth of the
+    surroundings (losses.sparse_depth). Checkpoints go to train.checkpoints/ beside the output, so a killed job
+    resumes where it stopped."""
     input:
-        decode=RESULTS_DIR / "{capture}" / "decode",
-        poses=RESULTS_DIR / "{capture}" / "poses",
-        masks=RESULTS_DIR / "{capture}" / "masks",
+        decode=out(layout.DECODE),
+        poses=out(layout.POSES),
+        masks=out(layout.MASKS),
         capture_yaml=capture_config,
     params:
         config=config_digest("train"),
     output:
-        directory(RESULTS_DIR / "{capture}" / "train"),
+        directory(out(layout.TRAIN)),
     log:
-        RESULTS_DIR / "{capture}" / "logs" / "train.log",
+        log_of(layout.TRAIN),
     threads: workflow.cores
-    shell:
-        "images={input.decode}; if [ -d {input.poses}/undistorted ]; then images={input.poses}/undistorted; fi; "
-        "points=; if [ -d {input.poses}/sparse ]; then points='--points {input.poses}/sparse'; fi; "
-        "{ORCA} train --decode $images --cameras {input.masks}/cameras.json --masks {input.masks}/masks $points "
-        "--capture {CAPTURES_DIR}/{wildcards.capture} --out {output} --preset {PRESET} {SET} > {log} 2>&1"
+    run:
+        cameras = Path(input.masks) / layout.CAMERAS_JSON
+        images = os.path.relpath(image_folder(load_cameras(cameras), cameras.parent, Path(input.decode)))
+        sparse = Path(input.poses) / layout.SPARSE
+        points = f"--points {sparse}" if sparse.is_dir() else ""
+        shell("{ORCA} train --decode {images} --cameras {cameras} --masks {input.masks}/{layout.MASK_FILES} {points} "
+              "--capture {CAPTURES_DIR}/{wildcards.capture} --out {output} --preset {PRESET} {SET} > {log} 2>&1")
 
 
 rule mesh:
     """The trained SDF -> mesh.ply (open3d marching cubes, diffuse-head vertex colours; mesh_colmap.ply when the
     cameras record to_colmap), mesh_report.json, mesh.png."""
     input:
-        train=RESULTS_DIR / "{capture}" / "train",
-        masks=RESULTS_DIR / "{capture}" / "masks",
+        train=out(layout.TRAIN),
+        masks=out(layout.MASKS),
     params:
         config=config_digest("mesh", reads_capture_yaml=False),
     output:
-        directory(RESULTS_DIR / "{capture}" / "mesh"),
+        directory(out(layout.MESH)),
     log:
-        RESULTS_DIR / "{capture}" / "logs" / "mesh.log",
+        log_of(layout.MESH),
     shell:
-        "{ORCA} mesh {input.train} --cameras {input.masks}/cameras.json --out {output} --preset {PRESET} {SET} > {log} 2>&1"
+        "{ORCA} mesh {input.train} --cameras {input.masks}/{layout.CAMERAS_JSON} --out {output} --preset {PRESET} "
+        "{SET} > {log} 2>&1"
 
 
 rule export:
@@ -213,17 +236,18 @@ rule export:
     equirectangular panorama + depth, the environment as a point cloud, orbit and flythrough videos (MP4),
     object renders (combined, diffuse, specular, normals). Rendering uses every core."""
     input:
-        train=RESULTS_DIR / "{capture}" / "train",
-        masks=RESULTS_DIR / "{capture}" / "masks",
+        train=out(layout.TRAIN),
+        masks=out(layout.MASKS),
     params:
         config=config_digest("export", reads_capture_yaml=False),
     output:
-        directory(RESULTS_DIR / "{capture}" / "export"),
+        directory(out(layout.EXPORT)),
     log:
-        RESULTS_DIR / "{capture}" / "logs" / "export.log",
+        log_of(layout.EXPORT),
     threads: workflow.cores
     shell:
-        "{ORCA} export {input.train} --cameras {input.masks}/cameras.json --out {output} --preset {PRESET} {SET} > {log} 2>&1"
+        "{ORCA} export {input.train} --cameras {input.masks}/{layout.CAMERAS_JSON} --out {output} --preset {PRESET} "
+        "{SET} > {log} 2>&1"
 
 
 rule evaluate:
@@ -231,17 +255,18 @@ rule evaluate:
     mesh's Chamfer distance, normals, diffuse / specular / combined, environment views and their depth (8
     object views at half size keep it minutes on a CPU)."""
     input:
-        train=RESULTS_DIR / "{capture}" / "train",
-        masks=RESULTS_DIR / "{capture}" / "masks",
-        mesh=RESULTS_DIR / "{capture}" / "mesh",
-        ground_truth=CAPTURES_DIR / "{capture}" / "ground_truth",
+        train=out(layout.TRAIN),
+        masks=out(layout.MASKS),
+        mesh=out(layout.MESH),
+        ground_truth=CAPTURES_DIR / "{capture}" / layout.GROUND_TRUTH,
     output:
-        directory(RESULTS_DIR / "{capture}" / "evaluate"),
+        directory(out(layout.EVALUATE)),
     log:
-        RESULTS_DIR / "{capture}" / "logs" / "evaluate.log",
+        log_of(layout.EVALUATE),
     shell:
-        "{ORCA} evaluate {input.train} --ground-truth {input.ground_truth} --cameras {input.masks}/cameras.json "
-        "--mesh {input.mesh}/mesh.ply --out {output} --views 8 --downscale 2 > {log} 2>&1"
+        "{ORCA} evaluate {input.train} --ground-truth {input.ground_truth} "
+        "--cameras {input.masks}/{layout.CAMERAS_JSON} --mesh {input.mesh}/{layout.MESH_PLY} --out {output} --views 8 "
+        "--downscale 2 > {log} 2>&1"
 
 
 rule report:
@@ -251,8 +276,8 @@ rule report:
     input:
         unpack(report_inputs),
     output:
-        directory(RESULTS_DIR / "{capture}" / "report"),
+        directory(out(layout.REPORT)),
     log:
-        RESULTS_DIR / "{capture}" / "logs" / "report.log",
+        log_of(layout.REPORT),
     shell:
         "{ORCA} report {RESULTS_DIR}/{wildcards.capture} --out {output} > {log} 2>&1"

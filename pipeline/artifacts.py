@@ -23,8 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import InputError
-
-MANIFEST = "manifest.json"
+from .layout import MANIFEST, stage_dir  # noqa: F401 - stage_dir: train, mesh, export, render, evaluate, report
 
 log = logging.getLogger("orca")
 
@@ -39,12 +38,6 @@ def _as_if_created(path: Path, base_mode: int) -> None:
     """tempfile creates files 0600 and folders 0700 (private); an artifact gets the modes ``open`` and
     ``mkdir`` would have given it, so other users and tools (a web server for the report) can read it."""
     path.chmod(base_mode & ~_umask())
-
-
-def stage_dir(capture: str | Path, stage: str, given: str | Path | None = None) -> Path:
-    """A stage's folder: ``given`` when set, else ``results/<capture folder name>/<stage>`` (the CLI default,
-    the Snakefile's layout)."""
-    return Path(given) if given is not None else Path("results") / Path(capture).resolve().name / stage
 
 
 @contextlib.contextmanager
@@ -206,6 +199,37 @@ def write_json(path: str | Path, data: Any) -> Path:
 
 def read_json(path: str | Path) -> Any:
     return json.loads(Path(path).read_text(encoding="utf-8"))
+
+
+def read_stage_json(path: str | Path, stage: str | None = None) -> Any:
+    """A JSON file a stage wrote. Missing or damaged (an interrupted copy, an edit gone wrong), it is an
+    :class:`InputError` naming the file and the stage to rerun (:func:`rerun_fix`), not a traceback."""
+    path = Path(path)
+    try:
+        return read_json(path)
+    except FileNotFoundError as e:
+        raise InputError("file not found", path, rerun_fix(path, stage)) from e
+    except (OSError, ValueError) as e:  # JSONDecodeError and UnicodeDecodeError are ValueErrors
+        raise InputError(f"not valid JSON ({e})", path, rerun_fix(path, stage)) from e
+
+
+def rerun_fix(path: Path, stage: str | None = None) -> str:
+    """What to do about a damaged stage output: rerun the stage the manifest beside it names (or the one of
+    the folder above: poses/undistorted/ is the poses stage's), else ``stage``. A file no stage wrote (a
+    capture's own cameras.json) is the user's to correct."""
+    stage = _writer(path) or stage
+    if stage is None:
+        return "correct the file"
+    return f"rerun `orca {stage}` (or snakemake --forcerun {stage})"
+
+
+def _writer(path: Path) -> str | None:
+    for folder in (path.parent, path.parent.parent):
+        try:
+            return str(read_json(folder / MANIFEST)["stage"])
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+    return None
 
 
 def _json_default(obj: Any) -> Any:

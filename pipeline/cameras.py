@@ -13,9 +13,8 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from .artifacts import write_json
+from .artifacts import read_stage_json, rerun_fix, write_json
 from .errors import InputError, validation_problem
-from .results import read_stage_json, rerun_fix
 
 Matrix4 = list[list[float]]
 

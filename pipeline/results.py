@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -20,43 +21,24 @@ from typing import Any
 
 import numpy as np
 
-from .artifacts import MANIFEST, read_json
+from .artifacts import read_stage_json, rerun_fix
+from .cameras import CameraSet, load_cameras
 from .errors import InputError
 from .imageio import read_exr, read_image
-
-DECODE_JSON = "decode.json"
-IMAGE_FILES = ("linear", "srgb", "clipped")  # decode.json's per-image file entries
-
-
-def read_stage_json(path: str | Path, stage: str | None = None) -> Any:
-    """A JSON file a stage wrote. Missing or damaged (an interrupted copy, an edit gone wrong), it is an
-    :class:`InputError` naming the file and the stage to rerun (:func:`rerun_fix`), not a traceback."""
-    path = Path(path)
-    try:
-        return read_json(path)
-    except FileNotFoundError as e:
-        raise InputError("file not found", path, rerun_fix(path, stage)) from e
-    except (OSError, ValueError) as e:  # JSONDecodeError and UnicodeDecodeError are ValueErrors
-        raise InputError(f"not valid JSON ({e})", path, rerun_fix(path, stage)) from e
-
-
-def rerun_fix(path: Path, stage: str | None = None) -> str:
-    """What to do about a damaged stage output: rerun the stage the manifest beside it names (or the one of
-    the folder above: poses/undistorted/ is the poses stage's), else ``stage``. A file no stage wrote (a
-    capture's own cameras.json) is the user's to correct."""
-    stage = _writer(path) or stage
-    if stage is None:
-        return "correct the file"
-    return f"rerun `orca {stage}` (or snakemake --forcerun {stage})"
-
-
-def _writer(path: Path) -> str | None:
-    for folder in (path.parent, path.parent.parent):
-        try:
-            return str(read_json(folder / MANIFEST)["stage"])
-        except (OSError, ValueError, KeyError, TypeError):
-            continue
-    return None
+from .layout import (
+    CAMERAS_JSON,
+    DECODE,
+    DECODE_JSON,
+    IMAGE_KINDS,
+    MANIFEST,
+    MASKS,
+    MASKS_REPORT,
+    POSES,
+    POSES_REPORT,
+    SPARSE,
+    mask_file,
+)
+from .signals import import_pycolmap
 
 
 def _read_image_file(path: Path, reader: Any, written_by: Path, stage: str) -> np.ndarray:
@@ -76,24 +58,25 @@ class DecodeArtifacts:
 
     @cached_property
     def meta(self) -> dict[str, Any]:
-        return read_stage_json(self.folder / DECODE_JSON, "decode")
+        return read_stage_json(self.folder / DECODE_JSON, DECODE)
 
     @cached_property
     def manifest(self) -> dict[str, Any]:
-        return read_stage_json(self.folder / MANIFEST, "decode")
+        return read_stage_json(self.folder / MANIFEST, DECODE)
 
     @property
     def names(self) -> list[str]:
         return [im["name"] for im in self.meta["images"]]
 
-    def _entry(self, name: str) -> dict[str, Any]:
+    def entry(self, name: str) -> dict[str, Any]:
+        """decode.json's record of one photo (its linear/srgb/clipped files, EXIF)."""
         for im in self.meta["images"]:
             if im["name"] == name:
                 return im
         raise KeyError(f"{name!r} is not in {self.folder / DECODE_JSON}; known: {', '.join(self.names)}")
 
     def _image(self, name: str, kind: str, reader: Any) -> np.ndarray:
-        return _read_image_file(self.folder / self._entry(name)[kind], reader, self.folder / DECODE_JSON, "decode")
+        return _read_image_file(self.folder / self.entry(name)[kind], reader, self.folder / DECODE_JSON, DECODE)
 
     def linear(self, name: str) -> np.ndarray:
         """``(H, W, 3)`` float32 linear, exposure-normalized radiance."""
@@ -116,14 +99,14 @@ def load_decode(folder: str | Path) -> DecodeArtifacts:
         raise InputError("not a decode artifact (no decode.json)", folder, "run `orca decode` on the capture first")
     decoded = DecodeArtifacts(folder)
     path = folder / DECODE_JSON
-    meta, fix = decoded.meta, rerun_fix(path, "decode")
+    meta, fix = decoded.meta, rerun_fix(path, DECODE)
     images = meta.get("images") if isinstance(meta, dict) else None
     entries_ok = isinstance(images, list) and all(
-        isinstance(im, dict) and all(isinstance(im.get(k), str) for k in ("name", *IMAGE_FILES)) for im in images)
+        isinstance(im, dict) and all(isinstance(im.get(k), str) for k in ("name", *IMAGE_KINDS)) for im in images)
     if not entries_ok or "size" not in meta:
         raise InputError("decode.json lacks the image list or size (every image needs its name, linear, srgb and "
                          "clipped files)", path, fix)
-    missing = [im[k] for im in images for k in IMAGE_FILES if not (folder / im[k]).is_file()]
+    missing = [im[k] for im in images for k in IMAGE_KINDS if not (folder / im[k]).is_file()]
     if missing:
         shown = ", ".join(missing[:5]) + (f" and {len(missing) - 5} more" if len(missing) > 5 else "")
         raise InputError(f"{len(missing)} of the image files decode.json lists are missing: {shown}", folder, fix)
@@ -138,26 +121,22 @@ class PosesArtifacts:
 
     @cached_property
     def report(self) -> dict[str, Any]:
-        return read_stage_json(self.folder / "poses_report.json", "poses")
+        return read_stage_json(self.folder / POSES_REPORT, POSES)
 
-    def cameras(self):
-        """:class:`~pipeline.cameras.CameraSet` in the object-centred unit-sphere frame."""
-        from .cameras import load_cameras
+    def cameras(self) -> CameraSet:
+        """The cameras in the object-centred unit-sphere frame."""
+        return load_cameras(self.folder / CAMERAS_JSON)
 
-        return load_cameras(self.folder / "cameras.json")
-
-    def reconstruction(self):
+    def reconstruction(self) -> Any:
         """The COLMAP model (``pycolmap.Reconstruction``, COLMAP's frame); None for known cameras."""
-        if not (self.folder / "sparse").is_dir():
+        if not (self.folder / SPARSE).is_dir():
             return None
-        from .signals import import_pycolmap
-
-        return import_pycolmap().Reconstruction(self.folder / "sparse")
+        return import_pycolmap().Reconstruction(self.folder / SPARSE)
 
 
 def load_poses(folder: str | Path) -> PosesArtifacts:
     folder = Path(folder)
-    if not (folder / "cameras.json").is_file():
+    if not (folder / CAMERAS_JSON).is_file():
         raise InputError("not a poses artifact (no cameras.json)", folder, "run `orca poses` on the capture first")
     return PosesArtifacts(folder)
 
@@ -171,7 +150,7 @@ class MasksArtifacts:
 
     @cached_property
     def report(self) -> dict[str, Any]:
-        return read_stage_json(self.folder / "masks_report.json", "masks")
+        return read_stage_json(self.folder / MASKS_REPORT, MASKS)
 
     @property
     def names(self) -> list[str]:
@@ -179,20 +158,47 @@ class MasksArtifacts:
 
     def mask(self, name: str) -> np.ndarray:
         """``(H, W)`` bool, True on the object."""
-        path = self.folder / "masks" / f"{name}.png"
+        path = self.folder / mask_file(name)
         if not path.is_file():
             raise KeyError(f"no mask {name!r} in {self.folder}; known: {', '.join(self.names[:10])}")
-        return _read_image_file(path, read_image, self.folder / "masks_report.json", "masks") > 127
+        return _read_image_file(path, read_image, self.folder / MASKS_REPORT, MASKS) > 127
 
-    def cameras(self):
-        """:class:`~pipeline.cameras.CameraSet` re-normalized to the object's tight sphere (see the report)."""
-        from .cameras import load_cameras
-
-        return load_cameras(self.folder / "cameras.json")
+    def cameras(self) -> CameraSet:
+        """The cameras re-normalized to the object's tight sphere (see the report)."""
+        return load_cameras(self.folder / CAMERAS_JSON)
 
 
 def load_masks(folder: str | Path) -> MasksArtifacts:
     folder = Path(folder)
-    if not (folder / "masks_report.json").is_file():
+    if not (folder / MASKS_REPORT).is_file():
         raise InputError("not a masks artifact (no masks_report.json)", folder, "run `orca masks` on the capture first")
     return MasksArtifacts(folder)
+
+
+# --------------------------------------------------------------------------------- the images of cameras.json
+
+
+def image_folder(cameras: CameraSet, folder: Path, fallback: Path | None = None) -> Path:
+    """The decode-style folder holding the images the cameras (of a cameras.json in ``folder``) point at
+    (``<folder>/linear/<name>.exr``): the decode stage's, or the poses stage's ``undistorted/``. ``fallback``
+    (a decode folder) serves cameras without image paths. Every later stage reads its images from here."""
+    for cam in cameras.cameras:
+        if cam.image:
+            found = (folder / cam.image).resolve().parent.parent
+            if (found / DECODE_JSON).is_file():
+                return found
+    if fallback is not None and (fallback / DECODE_JSON).is_file():
+        return fallback
+    raise InputError("cannot tell which decoded images the cameras belong to", folder / CAMERAS_JSON,
+                     fix="pass --decode results/<capture>/decode")
+
+
+def relocated(cameras: CameraSet, folder: Path, to: Path) -> CameraSet:
+    """The cameras of a cameras.json in ``folder`` with image paths relative to ``to`` (where a new one goes)."""
+    cams = []
+    for c in cameras.cameras:
+        image = c.image
+        if image:
+            image = os.path.relpath((folder / image).resolve(), to.resolve())
+        cams.append(c.model_copy(update={"image": image}))
+    return cameras.model_copy(update={"cameras": cams})

@@ -19,10 +19,9 @@ from typing import Any
 import numpy as np
 from pydantic import ValidationError
 
-from .artifacts import write_json
+from .artifacts import read_stage_json, write_json
 from .cameras import Camera, CameraSet, as_matrix4, camera_problems
 from .errors import InputError
-from .results import read_stage_json
 
 FLIP_YZ = np.diag([1.0, -1.0, -1.0, 1.0])
 INTRINSICS = ("fl_x", "fl_y", "cx", "cy", "w", "h")

@@ -1,0 +1,75 @@
+"""Where everything lives: the capture folder's names, the stages in DAG order, and every artifact's path
+and file name. Stages, the Snakefile and the loaders (:mod:`pipeline.results`) spell names only through here.
+
+    captures/<capture>/             photos (or images/), capture.yaml, masks/, calibration/, cameras.json
+                                    or transforms.json (known cameras), ground_truth/ (synthetic captures)
+    results/<capture>/<stage>/      one folder per stage, written atomically, each with manifest.json
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+# ------------------------------------------------------------------------------------------- the capture
+
+PHOTO_SUBDIR = "images"  # when present, the photos are there and nowhere else
+CAPTURE_YAML = "capture.yaml"
+CAPTURE_CONFIGS = (CAPTURE_YAML, "capture.yml")
+USER_MASKS = "masks"  # <photo name>.png, white = object
+CALIBRATION = Path("calibration") / "calibration.json"  # `orca calibrate`
+GROUND_TRUTH = "ground_truth"
+SCENE_JSON = "scene.json"  # in ground_truth/: marks a synthetic capture
+
+# ------------------------------------------------------------------------------------------- the stages
+
+RESULTS = Path("results")
+DECODE, POSES, MASKS, TRAIN, MESH, EXPORT, EVALUATE, REPORT = (
+    "decode", "poses", "masks", "train", "mesh", "export", "evaluate", "report")
+STAGES = (DECODE, POSES, MASKS, TRAIN, MESH, EXPORT, EVALUATE)  # DAG order; the report shows them all
+LOGS = "logs"  # results/<capture>/logs/<stage>.log (the Snakefile's)
+
+MANIFEST = "manifest.json"  # in every stage folder
+
+# ------------------------------------------------------------------------------------------- artifacts
+
+# decode (and poses/undistorted/, a folder in decode's layout)
+DECODE_JSON = "decode.json"
+IMAGE_KINDS = LINEAR, SRGB, CLIPPED = ("linear", "srgb", "clipped")  # a folder each; decode.json records each
+# image's three files
+
+# poses
+CAMERAS_JSON = "cameras.json"  # also a capture's known cameras, and masks' re-normalized cameras
+TRANSFORMS_JSON = "transforms.json"
+SPARSE = "sparse"  # COLMAP binary model
+UNDISTORTED = "undistorted"
+POSES_REPORT = "poses_report.json"
+POSES_FIGURE = "poses.png"
+
+# masks (and cameras.json)
+MASK_FILES = "masks"  # <name>.png, 0/255 at the image's full size
+MASKS_REPORT = "masks_report.json"
+OVERLAYS = "overlays"
+CONTACT_SHEET = "contact_sheet.jpg"
+
+# train, mesh, export, evaluate, report
+MODEL = "model.pt"
+CHECKPOINTS_SUFFIX = ".checkpoints"  # train.checkpoints/ beside the train folder
+MESH_PLY = "mesh.ply"
+EVALUATE_JSON = "evaluate.json"
+REPORT_HTML = "report.html"
+
+
+def stage_dir(capture: str | Path, stage: str, given: str | Path | None = None) -> Path:
+    """A stage's folder: ``given`` when set, else ``results/<capture folder name>/<stage>`` (the CLI default,
+    the Snakefile's layout)."""
+    return Path(given) if given is not None else RESULTS / Path(capture).resolve().name / stage
+
+
+def decoded_files(name: str) -> dict[str, str]:
+    """A decoded image's files, relative to its decode-style folder, as decode.json records them."""
+    return {LINEAR: f"{LINEAR}/{name}.exr", SRGB: f"{SRGB}/{name}.png", CLIPPED: f"{CLIPPED}/{name}.png"}
+
+
+def mask_file(name: str) -> str:
+    """A mask, relative to the masks stage's folder."""
+    return f"{MASK_FILES}/{name}.png"
