@@ -136,7 +136,7 @@ class PosesConfig(StrictModel):
 
 
 class MasksConfig(StrictModel):
-    """Object masks (``orca masks``; see pipeline/stages/masks.py, the method in pipeline/silhouette.py)."""
+    """Object masks (``orca masks``; see pipeline/stages/masks.py, the method in pipeline/masking/)."""
 
     user_masks: Literal["auto", "ignore"] = Field(
         "auto",

@@ -18,26 +18,19 @@ from pipeline.config import MasksConfig, PosesConfig
 from pipeline.errors import InputError
 from pipeline.imageio import read_image, write_png
 from pipeline.mask_file import read_mask
-from pipeline.metrics import iou
-from pipeline.silhouette import (
+from pipeline.masking.hull import carve, hull_depth, hull_grid, reproject
+from pipeline.masking.sweeps import column_image, column_in_hull, corner_strength, floor_through_hull, front_evidence
+from pipeline.masking.views import (
     Plane,
     SegmentOptions,
     View,
-    carve,
-    column_image,
-    column_in_hull,
-    corner_strength,
-    floor_through_hull,
-    front_evidence,
-    hull_depth,
-    hull_grid,
     neighbours,
     pixel_rays,
     plane_homography,
-    reproject,
     sphere_distance,
     spread,
 )
+from pipeline.metrics import iou
 from pipeline.stages.masks import find_user_masks
 
 

@@ -4,7 +4,7 @@ Inputs: the poses stage's folder (``cameras.json``, normalized frame: the object
 the images its cameras point at (the decode stage's folder, or ``poses/undistorted/`` when the poses stage
 resampled the photos: the masks are in the pixel grid of the images training reads). Optional: user masks.
 
-**Automatic masks** (no downloaded weights): :mod:`pipeline.silhouette` -- the unit sphere's image as a prior,
+**Automatic masks** (no downloaded weights): :mod:`pipeline.masking` -- the unit sphere's image as a prior,
 the support plane found by photo-consistency (the floor and its shadows are background), a depth sweep
 outside the sphere (props in front, the room behind) and, against each round's hull, one between the cameras and
 the hull (props standing in front inside the sphere: their tops and the sides under them), the floor seen
@@ -61,8 +61,8 @@ from ..provenance import FORCE_HELP
 
 if TYPE_CHECKING:
     from ..cameras import CameraSet
+    from ..masking.views import Plane, View
     from ..results import DecodeArtifacts
-    from ..silhouette import Plane, View
     from .poses import UndistortMaps
 
 log = logging.getLogger("orca.masks")
@@ -184,7 +184,7 @@ def load_view(decoded: DecodeArtifacts, cam: Any, scale: float) -> View:
     """One photo at the working size (``scale`` of the camera's size): sRGB, clipped highlights, intrinsics."""
     import cv2
 
-    from ..silhouette import View
+    from ..masking.views import View
 
     srgb = decoded.srgb(cam.name)
     if srgb.shape[:2] != (cam.height, cam.width):
@@ -232,10 +232,12 @@ def run_masks(
     from ..artifacts import atomic_dir, check_output_dir, write_json, write_manifest
     from ..cameras import load_cameras
     from ..log import progress
+    from ..masking.hull import carve, carve_votes, hull_grid, reproject
+    from ..masking.segment import segment
+    from ..metrics import iou
     from ..object_frame import sphere_from_masks
     from ..provenance import check_capture_folder, common_capture
     from ..results import load_decode
-    from ..silhouette import carve, carve_votes, hull_grid, iou, reproject, segment
     from .poses import recorded_undistortion
 
     started = time.time()
@@ -366,16 +368,16 @@ def run_masks(
 
 
 def _segment_options(config: MasksConfig) -> Any:
-    from ..silhouette import SegmentOptions
+    from ..masking.views import SegmentOptions
 
     return SegmentOptions(
         rounds=config.rounds, grabcut_iterations=config.grabcut_iterations, hull_resolution=config.hull_resolution,
         carve_votes=config.carve_votes, carve_share=config.carve_share, seed_radius=config.seed_radius,
         neighbours=config.neighbours, neighbour_max_deg=config.neighbour_max_deg,
         consistency_rank=config.consistency_rank, floor=config.floor,
-        floor_threshold=config.floor_threshold, occluders=config.sweep, occluder_neighbours=config.sweep_neighbours,
-        occluder_rank=config.sweep_rank, occluder_threshold=config.sweep_threshold,
-        texture_threshold=config.texture_threshold, weak_weight=config.doubtful_vote, dark_level=config.dark_level,
+        floor_threshold=config.floor_threshold, sweep=config.sweep, sweep_neighbours=config.sweep_neighbours,
+        sweep_rank=config.sweep_rank, sweep_threshold=config.sweep_threshold,
+        texture_threshold=config.texture_threshold, doubtful_vote=config.doubtful_vote, dark_level=config.dark_level,
         final_reach_px=config.final_reach_px, front_sweep=config.front_sweep,
         through_floor=config.through_floor, through_reach_px=config.through_reach_px,
         through_views=config.through_views,
@@ -420,7 +422,7 @@ def _check(names: list[str], masks: list[np.ndarray], agreement: list[float], vi
            config: MasksConfig) -> list[str]:
     """Warnings a person should act on: empty masks, views that disagree with the hull, an object that seems
     larger than the poses stage's sphere (its masks were clipped by that sphere's image)."""
-    from ..silhouette import sphere_distance
+    from ..masking.views import sphere_distance
 
     out = []
     empty = [n for n, m in zip(names, masks) if not m.any()]

@@ -1,0 +1,93 @@
+"""The visual hull: voxels of the unit sphere carved by the views' masks, with votes (a few views, not one, must
+see a voxel off the object), and its reprojection into a view."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..object_frame import pixels_of
+from .views import Plane, SegmentOptions, View, pixel_rays, sphere_box
+
+
+def hull_grid(resolution: int, plane: Plane | None) -> tuple[np.ndarray, np.ndarray]:
+    """Voxel centres ``(V, 3)`` of the ``resolution``^3 grid over [-1, 1]^3 that lie in the unit sphere and
+    above the support plane, and their flat indices ``(V,)`` into the grid."""
+    ax = (np.arange(resolution) + 0.5) / resolution * 2.0 - 1.0
+    grid = np.stack(np.meshgrid(ax, ax, ax, indexing="ij"), -1).reshape(-1, 3)
+    keep = np.einsum("ij,ij->i", grid, grid) < 1.0
+    if plane is not None:
+        keep &= plane.height(grid) > 0.0
+    index = np.nonzero(keep)[0]
+    return grid[index].astype(np.float32), index
+
+
+OUTSIDE_VOTES = 1.0e3  # the "background votes" of voxels outside the carved region
+
+
+def carve(masks: Sequence[np.ndarray], views: Sequence[View], points: np.ndarray, index: np.ndarray,
+          resolution: int, weights: Sequence[np.ndarray | None] | None = None) -> np.ndarray:
+    """``(R, R, R)`` float32 background votes: for each voxel, in how many views that see it it lands off the
+    object (:data:`OUTSIDE_VOTES` for voxels outside the region or seen by fewer than half the views). The hull
+    is where the votes are below a small number: one view's mistake does not cut the object, while a voxel next
+    to a thin object, off its silhouette in only the few views that look along the thin side, is still cut.
+    ``weights``: per view, ``(H, W)`` float32 what a background vote from each pixel counts (None: 1 everywhere;
+    less where the vote is doubtful)."""
+    seen = np.zeros(len(points), np.int32)
+    off = np.zeros(len(points), np.float32)
+    for i, (m, v) in enumerate(zip(masks, views)):
+        inside, x, y = pixels_of(points, v.c2w, v.K, m.shape)
+        seen[inside] += 1
+        vote = ~m[y, x]
+        off[inside] += vote if weights is None or weights[i] is None else vote * weights[i][y, x]
+    votes = np.where(seen >= 0.5 * len(views), off, OUTSIDE_VOTES).astype(np.float32)
+    volume = np.full(resolution**3, OUTSIDE_VOTES, np.float32)
+    volume[index] = votes
+    return volume.reshape((resolution,) * 3)
+
+
+def carve_votes(opts: SegmentOptions, views: int) -> float:
+    """Background votes that cut a voxel: ``carve_share`` of the views, at least ``carve_votes``."""
+    return max(opts.carve_votes, round(opts.carve_share * views))
+
+
+def in_hull(volume: np.ndarray, points: np.ndarray, max_votes: float) -> np.ndarray:
+    """``(M,)`` bool: which of ``points`` ``(M, 3)`` lie in the hull ``volume < max_votes`` (``volume``: votes over
+    the grid on [-1, 1]^3, interpolated trilinearly, so the outline is finer than the voxels)."""
+    from scipy.ndimage import map_coordinates
+
+    res = volume.shape[0]
+    idx = (points + 1.0) * (res / 2.0) - 0.5
+    return map_coordinates(volume, idx.T, order=1, mode="constant", cval=OUTSIDE_VOTES) < max_votes
+
+
+def hull_depth(volume: np.ndarray, view: View, max_votes: float) -> np.ndarray:
+    """``(H, W)`` float32: the distance along each pixel's ray to where it enters the hull ``volume < max_votes``
+    (:func:`in_hull`; ``inf``: it misses), marching in steps of half a voxel through the unit sphere."""
+    out = np.full(view.shape, np.inf, np.float32)
+    box = sphere_box(view)
+    if box is None:
+        return out
+    x0, y0, x1, y1 = box
+    d = pixel_rays(view, box).reshape(-1, 3)
+    o = view.c2w[:3, 3]
+    b = d @ o
+    disc = b * b - (o @ o - 1.0)
+    hit = np.nonzero(disc > 0)[0]
+    d, b, root = d[hit], b[hit], np.sqrt(disc[hit])
+    t0, t1 = -b - root, -b + root
+    steps = int(np.ceil(2.0 * volume.shape[0]))  # the diameter (2) in half voxels (2 / res each)
+    entry = np.full(len(d), np.inf, np.float32)
+    for k in range(steps):
+        t = t0 + (t1 - t0) * ((k + 0.5) / steps)
+        np.minimum(entry, np.where(in_hull(volume, o + d * t[:, None], max_votes), t, np.inf), out=entry)
+    flat = np.full((y1 - y0) * (x1 - x0), np.inf, np.float32)
+    flat[hit] = entry
+    out[y0:y1, x0:x1] = flat.reshape(y1 - y0, x1 - x0)
+    return out
+
+
+def reproject(volume: np.ndarray, view: View, max_votes: float) -> np.ndarray:
+    """``(H, W)`` bool: pixels whose ray passes through the hull ``volume < max_votes`` (:func:`hull_depth`)."""
+    return np.isfinite(hull_depth(volume, view, max_votes))

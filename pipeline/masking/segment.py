@@ -1,0 +1,221 @@
+"""The driver: the evidence before any hull, then rounds of carving and GrabCut, then the final masks."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from ..metrics import iou
+from ..object_frame import camera_up
+from .grabcut import first_seeds, grabcut, hull_seeds
+from .hull import OUTSIDE_VOTES, carve, carve_votes, hull_depth, hull_grid
+from .support_plane import find_support_plane, floor_from_cost, plane_cost
+from .sweeps import floor_through_hull, front_evidence, occluded_region, occluder_evidence
+from .views import Plane, SegmentOptions, View, disc, neighbours, sphere_distance, spread
+
+log = logging.getLogger("orca.masks")
+
+
+@dataclass
+class Segmentation:
+    """What :func:`segment` found, at the working size."""
+
+    masks: list[np.ndarray]  # per view (H, W) bool: the final masks
+    colour_masks: list[np.ndarray]  # per view: the last round's GrabCut result
+    hull_masks: list[np.ndarray]  # per view: the last visual hull's reprojection
+    floor_masks: list[np.ndarray | None]  # per view: pixels explained by the support plane (None: no plane)
+    swept_masks: list[np.ndarray | None]  # per view: pixels a surface outside the sphere explains (None: no sweep)
+    plane: Plane | None
+    volume: np.ndarray  # (R, R, R) float32 background votes over [-1, 1]^3 (see carve)
+    rounds: list[dict[str, float]] = field(default_factory=list)  # per round: agreement of GrabCut and hull
+
+
+def _released(occluded: np.ndarray | None, front: np.ndarray | None, through: np.ndarray | None,
+              opts: SegmentOptions) -> np.ndarray | None:
+    """``(H, W)`` bool where the hull's core is not forced as object (None: nowhere). The hull knows nothing of
+    occlusion: not near a prop seen in front (within ``occluder_reach_px``). Where the floor shows through the
+    hull the hull is wrong, and the floor found there is a few textured specks of a larger hole: not within
+    ``through_reach_px`` of them, so that GrabCut decides the rest of the hole by colour."""
+    out = None
+    for found, reach in ((occluded, opts.occluder_reach_px), (front, opts.occluder_reach_px),
+                         (through, opts.through_reach_px)):
+        if found is not None and found.any():
+            near = cv2.dilate(found.astype(np.uint8), disc(reach)) > 0
+            out = near if out is None else out | near
+    return out
+
+
+def vote_weights(views: Sequence[View], backgrounds: Sequence[np.ndarray], floors: Sequence[np.ndarray | None],
+                 fixed: dict[int, np.ndarray], opts: SegmentOptions) -> list[np.ndarray | None]:
+    """Per view, ``(H, W)`` float32 what a background vote counts in :func:`carve` (None: 1 everywhere).
+    ``doubtful_vote`` on dark pixels (brightest channel <= ``dark_level``) that no evidence confirms as background
+    (outside the sphere, swept, floor): a dark object bottom and its dark contact shadow look alike, and views
+    from above lose the bottom by colour."""
+    out: list[np.ndarray | None] = []
+    for i, v in enumerate(views):
+        if i in fixed:
+            out.append(None)
+            continue
+        weight = np.ones(v.shape, np.float32)
+        sure = backgrounds[i] | (v.image.max(-1) > opts.dark_level)
+        if floors[i] is not None:
+            sure = sure | floors[i]
+        weight[~sure] = opts.doubtful_vote
+        out.append(weight)
+    return out
+
+
+@dataclass
+class Evidence:
+    """What :func:`gather_evidence` found before any hull (per view, at the working size)."""
+
+    plane: Plane | None
+    spheres: list[np.ndarray]  # (H, W) float32: distance of each pixel's ray from the centre (< 1: in the sphere)
+    floors: list[np.ndarray | None]  # pixels the support plane explains
+    above: list[np.ndarray | None]  # pixels the support plane clearly does not explain
+    backgrounds: list[np.ndarray]  # certain background: outside the sphere's image, or swept
+    occluded: list[np.ndarray | None]  # pixels a surface outside the sphere explains
+    masks: list[np.ndarray]  # the first GrabCut masks (the user's where fixed)
+
+
+def gather_evidence(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.ndarray] | None = None,
+                    step: Callable[[str], None] = lambda label: None) -> Evidence:
+    """The support plane, floor and swept evidence per view, and the first masks from the sphere prior."""
+    fixed = fixed or {}
+    nbrs = neighbours(views, opts.neighbours, opts.neighbour_max_deg)
+    plane = find_support_plane(views, nbrs, opts) if opts.floor else None
+    step("support plane")
+    if plane is not None:
+        log.info("support plane %.3f below the centre, tilt %.1f deg from the cameras' up, explains %.0f %% of the "
+                 "pixels around the object", -plane.offset,
+                 np.degrees(np.arccos(np.clip(plane.normal @ camera_up(np.stack([v.c2w for v in views])), -1, 1))),
+                 100 * plane.consistent_fraction)
+
+    spheres = [sphere_distance(v) for v in views]
+    floors: list[np.ndarray | None] = []
+    above: list[np.ndarray | None] = []
+    backgrounds = []
+    occluded: list[np.ndarray | None] = []
+    near = neighbours(views, opts.sweep_neighbours, opts.neighbour_max_deg) if opts.sweep else None
+    for i, v in enumerate(views):
+        outside = spheres[i] >= 1.0
+        if near is not None:
+            occluded.append(occluder_evidence(v, [views[j] for j in near[i]], opts))
+        else:
+            occluded.append(None)
+        if plane is not None:
+            cost = plane_cost(v, [views[j] for j in nbrs[i]], plane.normal, plane.offset, opts.consistency_rank)
+            floors.append(floor_from_cost(cost, outside, opts))
+            above.append((cost > opts.not_floor_threshold) & ~outside)
+        else:
+            floors.append(None)
+            above.append(None)
+        backgrounds.append(outside)
+        if occluded[i] is not None:
+            backgrounds[i] = backgrounds[i] | occluded[i]
+        step("floor")
+
+    masks = []
+    for i, v in enumerate(views):
+        if i in fixed:
+            masks.append(fixed[i])
+        else:
+            certain = backgrounds[i] if floors[i] is None else backgrounds[i] | floors[i]
+            masks.append(grabcut(v.image, first_seeds(spheres[i], certain, opts.seed_radius, above[i]),
+                                 opts.grabcut_iterations))
+        step("segment")
+    return Evidence(plane, spheres, floors, above, backgrounds, occluded, masks)
+
+
+def segment(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.ndarray] | None = None,
+            on_step: Callable[[str], None] | None = None) -> Segmentation:
+    """Object masks for every view (see the module doc).
+
+    Args:
+        views: the photos at the working size, cameras in the normalized frame.
+        fixed: view index -> ``(H, W)`` bool mask the user gave: kept as is, and it votes in every carve.
+        on_step: called with a short label after each unit of work (progress bars).
+    """
+    step = on_step or (lambda label: None)
+    evidence = gather_evidence(views, opts, fixed, step)
+    return refine(views, opts, evidence, fixed, step)
+
+
+def _log_found(r: int, what: str, views: Sequence[View], found: Sequence[np.ndarray | None]) -> None:
+    names = [v.name for v, f in zip(views, found) if f is not None and f.any()]
+    if names:
+        log.info("round %d: %s in %d view(s): %s", r + 1, what, len(names), ", ".join(names))
+
+
+def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixed: dict[int, np.ndarray] | None = None,
+           step: Callable[[str], None] = lambda label: None) -> Segmentation:
+    """Rounds of carving and GrabCut from the ``evidence``, then the final masks (see the module doc)."""
+    fixed = fixed or {}
+    n = len(views)
+    plane, backgrounds, occluded = evidence.plane, evidence.backgrounds, evidence.occluded
+    floors = list(evidence.floors)
+    masks = list(evidence.masks)
+    near = neighbours(views, opts.sweep_neighbours, opts.neighbour_max_deg)
+    around = spread(views, opts.through_views)
+    points, index = hull_grid(opts.hull_resolution, plane)
+    rounds: list[dict[str, float]] = []
+    hulls: list[np.ndarray] = []
+    volume = np.full((opts.hull_resolution,) * 3, OUTSIDE_VOTES, np.float32)
+    through: list[np.ndarray | None] = [None] * n
+    fronts: list[np.ndarray | None] = [None] * n
+    for r in range(opts.rounds):
+        weights = vote_weights(views, backgrounds, floors, fixed, opts)
+        volume = carve(masks, views, points, index, opts.hull_resolution, weights)
+        votes = carve_votes(opts, n)
+        depths = [hull_depth(volume, v, votes - 0.5) for v in views]
+        hulls = [np.isfinite(d) for d in depths]
+        step("carve")
+        if r > 0:
+            for i, v in enumerate(views):
+                if plane is not None and i not in fixed and opts.front_sweep:
+                    # Props in front of the object inside the sphere, found anew against each round's hull (not the
+                    # first round's: the sphere prior's masks make a hull too loose to have much in front of it).
+                    fronts[i] = front_evidence(v, [views[j] for j in near[i]], plane, depths[i], volume, votes - 0.5,
+                                               opts)
+                if plane is not None and i not in fixed and opts.through_floor:
+                    through[i] = floor_through_hull(v, [views[j] for j in around[i]], plane, hulls[i], opts)
+                step("evidence against the hull")
+            _log_found(r, "a prop in front of the hull", views, fronts)
+            _log_found(r, "the floor seen through the hull", views, through)
+        # Both are certain background: no mask keeps them, and the floor confirms the view's votes in the next carve.
+        backgrounds = [np.logical_or.reduce([e for e in (b, t, f) if e is not None])
+                       for b, t, f in zip(evidence.backgrounds, through, fronts)]
+        new = []
+        for i, v in enumerate(views):
+            if i in fixed:
+                new.append(fixed[i])
+            else:
+                seeds = hull_seeds(hulls[i], _released(occluded[i], fronts[i], through[i], opts), backgrounds[i],
+                                   floors[i], opts.core_erode_px, opts.band_px, v.clipped)
+                new.append(grabcut(v.image, seeds, opts.grabcut_iterations))
+            step("segment")
+        agreement = [iou(a, b) for a, b in zip(new, hulls)]
+        change = [iou(a, b) for a, b in zip(new, masks)]
+        rounds.append({"agreement_median": float(np.median(agreement)), "agreement_min": float(np.min(agreement)),
+                       "change_median": float(np.median(change))})
+        log.info("round %d: GrabCut vs hull IoU median %.3f (worst %.3f); masks changed by %.3f IoU", r + 1,
+                 rounds[-1]["agreement_median"], rounds[-1]["agreement_min"], 1 - rounds[-1]["change_median"])
+        masks = new
+    # The final masks: the hull's reprojection -- the views agree on it, and it keeps what one view's colours
+    # lose (a glossy rim mirroring the background, a dark bottom on its dark shadow) -- less what this view
+    # knows the hull cannot: certain background (outside the sphere, swept) and, where a prop in front was
+    # seen, the pieces GrabCut gave to that prop.
+    final = []
+    for i, (m, h) in enumerate(zip(masks, hulls)):
+        if i not in fixed:
+            if opts.final_reach_px >= 0:
+                near = cv2.dilate(m.astype(np.uint8), disc(opts.final_reach_px)) > 0 if opts.final_reach_px else m
+                m = h & near & ~backgrounds[i]
+            else:
+                m = h & ~backgrounds[i] & ~occluded_region(h, m, occluded[i])
+        final.append(m)
+    return Segmentation(final, masks, hulls, floors, occluded, plane, volume, rounds)

@@ -1,0 +1,115 @@
+"""The support plane the object stands on, found by photo-consistency: under the plane's homography a floor
+pixel -- shadows included -- has the same colour in the neighbouring views, an object pixel does not."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+
+import cv2
+import numpy as np
+
+from ..object_frame import camera_up
+from .views import Plane, SegmentOptions, View, disc, plane_homography, sphere_distance
+
+log = logging.getLogger("orca.masks")
+
+
+def plane_cost(view: View, others: Sequence[View], normal: np.ndarray, offset: float, rank: int,
+               window: int = 5, box: tuple[int, int, int, int] | None = None, min_views: int = 2) -> np.ndarray:
+    """``(h, w)`` float32 over ``box`` (default: the whole image): how badly the plane ``normal . x = offset``
+    explains each pixel -- the ``rank``-th smallest (1-based) over the neighbours of the mean absolute sRGB
+    difference (0..1) over a ``window`` box.
+
+    Only neighbours that see the plane's point count: it must land inside their image. With fewer such neighbours
+    than ``rank`` the rank drops to their number; with fewer than ``min_views`` the cost is ``inf`` (no
+    evidence)."""
+    H_, W_ = view.shape
+    x0, y0, x1, y1 = box if box is not None else (0, 0, W_, H_)
+    size = (x1 - x0, y1 - y0)
+    shift = np.array([[1.0, 0.0, x0], [0.0, 1.0, y0], [0.0, 0.0, 1.0]])  # crop pixel -> image pixel
+    img = view.image[y0:y1, x0:x1].astype(np.float32) / 255.0
+    costs = np.full((len(others), size[1], size[0]), np.inf, np.float32)
+    for k, other in enumerate(others):
+        H = plane_homography(view, other, normal, offset) @ shift
+        warped = cv2.warpPerspective(other.image, H, size, flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                     borderMode=cv2.BORDER_CONSTANT, borderValue=(0, 0, 0))
+        visible = np.ones(other.shape, np.uint8)
+        seen = cv2.warpPerspective(visible, H, size, flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
+                                   borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        seen = cv2.erode(seen, np.ones((window, window), np.uint8))  # the whole window must be seen
+        diff = cv2.blur(np.abs(warped.astype(np.float32) / 255.0 - img).mean(-1), (window, window))
+        costs[k] = np.where(seen > 0, diff, np.inf)
+    count = np.isfinite(costs).sum(0)
+    if len(others) == 0:
+        return np.full((size[1], size[0]), np.inf, np.float32)
+    costs.sort(axis=0)
+    pick = np.clip(np.minimum(rank, count) - 1, 0, len(others) - 1)
+    out = np.take_along_axis(costs, pick[None], axis=0)[0]
+    return np.where(count >= min(min_views, rank), out, np.inf).astype(np.float32)
+
+
+def _tilted(normal: np.ndarray, ax: float, ay: float) -> np.ndarray:
+    """``normal`` rotated by small angles (radians) about two axes perpendicular to it."""
+    a = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(normal, a)
+    n = normal + ax * a + ay * b
+    return n / np.linalg.norm(n)
+
+
+def find_support_plane(views: Sequence[View], nbrs: Sequence[Sequence[int]], opts: SegmentOptions,
+                       samples: int = 6, min_fraction: float = 0.08) -> Plane | None:
+    """The plane the object stands on, by photo-consistency (see the module doc), or None if no plane
+    perpendicular to the cameras' up within ~10 degrees explains at least ``min_fraction`` of the pixels
+    outside the unit sphere's image.
+
+    Searched: offsets along the up vector from 1.6 below the centre to just below it (coarse, then fine), then
+    tilts of up to ~8 degrees (the cameras' mean up is off by the photographer's average tilt)."""
+    up = camera_up(np.stack([v.c2w for v in views]))
+    pick = np.unique(np.linspace(0, len(views) - 1, min(samples, len(views))).round().astype(int))
+    regions = {int(i): sphere_distance(views[i]) >= 1.0 for i in pick}
+
+    def score(normal: np.ndarray, offset: float) -> float:
+        fractions = []
+        for i in pick:
+            others = [views[j] for j in nbrs[i]]
+            cost = plane_cost(views[i], others, normal, offset, opts.consistency_rank)
+            fractions.append(float((cost[regions[int(i)]] < opts.floor_threshold).mean()))
+        return float(np.mean(fractions))
+
+    offsets = np.arange(-1.6, -0.02, 0.04)
+    scores = [score(up, d) for d in offsets]
+    best_d = float(offsets[int(np.argmax(scores))])
+    for d in np.arange(best_d - 0.04, best_d + 0.0401, 0.01):
+        s = score(up, d)
+        if s > max(scores):
+            scores.append(s)
+            best_d = float(d)
+    best = (max(scores), up, best_d)
+    step = np.radians(4.0)
+    for _ in range(3):  # a small pattern search over the tilt, the offset re-fitted locally each time
+        improved = False
+        for ax, ay in ((step, 0), (-step, 0), (0, step), (0, -step)):
+            n = _tilted(best[1], ax, ay)
+            if np.degrees(np.arccos(np.clip(n @ up, -1, 1))) > 10.0:
+                continue
+            for d in (best[2] - 0.01, best[2], best[2] + 0.01):
+                s = score(n, d)
+                if s > best[0] + 1e-4:
+                    best, improved = (s, n, d), True
+        if not improved:
+            step /= 2
+    fraction, normal, offset = best
+    if fraction < min_fraction:
+        log.info("no support plane: the best plane explains %.0f %% of the pixels around the object "
+                 "(needs %.0f %%)", 100 * fraction, 100 * min_fraction)
+        return None
+    return Plane(normal, float(offset), fraction)
+
+
+def floor_from_cost(cost: np.ndarray, outside: np.ndarray, opts: SegmentOptions) -> np.ndarray:
+    """Pixels of the sphere's image the support plane explains; an opening drops isolated specks (chance
+    matches on the object's flat patches)."""
+    floor = ((cost < opts.floor_threshold) & ~outside).astype(np.uint8)
+    return cv2.morphologyEx(floor, cv2.MORPH_OPEN, disc(1)) > 0
