@@ -66,21 +66,27 @@ def read_exr(path: str | Path) -> np.ndarray:
     raise ValueError(f"{path}: unsupported EXR channels {names}")
 
 
-def write_png(path: str | Path, image: np.ndarray) -> Path:
-    """Write uint8/uint16 ``(H, W)`` or RGB(A) ``(H, W, 3|4)`` as PNG, atomically."""
-    path = Path(path)
+def png_bytes(image: np.ndarray) -> bytes:
+    """uint8/uint16 ``(H, W)`` or RGB(A) ``(H, W, 3|4)`` encoded as a PNG file."""
     image = np.asarray(image)
     if image.dtype not in (np.uint8, np.uint16):
-        raise ValueError(f"write_png: expected uint8 or uint16, got {image.dtype}")
+        raise ValueError(f"PNG: expected uint8 or uint16, got {image.dtype}")
     if image.ndim == 3 and image.shape[2] == 3:
         image = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
     elif image.ndim == 3 and image.shape[2] == 4:
         image = cv2.cvtColor(image, cv2.COLOR_RGBA2BGRA)
+    ok, buf = cv2.imencode(".png", image)
+    if not ok:
+        raise OSError("PNG encoding failed")
+    return buf.tobytes()
+
+
+def write_png(path: str | Path, image: np.ndarray) -> Path:
+    """Write uint8/uint16 ``(H, W)`` or RGB(A) ``(H, W, 3|4)`` as PNG, atomically."""
+    path = Path(path)
+    data = png_bytes(image)
     with atomic_path(path) as tmp:
-        ok, buf = cv2.imencode(".png", image)
-        if not ok:
-            raise OSError(f"{path}: PNG encoding failed")
-        tmp.write_bytes(buf.tobytes())
+        tmp.write_bytes(data)
     return path
 
 
