@@ -15,7 +15,11 @@ import pytest
 
 from pipeline.cli import main
 from pipeline.errors import InputError
-from pipeline.stages.report import STAGES, run_report, text
+from pipeline.layout import STAGES
+from pipeline.report.curves import read_metrics, training_curves
+from pipeline.report.page import text
+from pipeline.report.reader import figure_data_uri
+from pipeline.stages.report import run_report
 
 TINY = [
     "train.iterations=4", "train.batch_rays=64", "train.mask_warmup=2", "train.n_coarse=8", "train.n_fine=4",
@@ -197,6 +201,79 @@ def test_partial_results_say_what_is_missing_and_escape_text(results, tmp_path):
     assert 'view <b>IMG_0001</b> & "friends" <script>alert(1)</script>' in page.body
 
 
+def test_every_section_says_which_file_is_damaged(results, tmp_path):
+    """Each stage's own file missing or damaged: every section still renders, names the file, and shows the
+    rest of what the stage wrote."""
+    damaged = tmp_path / "tiny"
+    shutil.copytree(results, damaged, ignore=shutil.ignore_patterns("report"))
+    (damaged / "decode" / "decode.json").write_text("{not json")
+    (damaged / "decode" / "manifest.json").unlink()
+    (damaged / "poses" / "poses_report.json").unlink()
+    (damaged / "masks" / "masks_report.json").write_text("[1, 2")
+    (damaged / "train" / "train_report.json").unlink()
+    (damaged / "train" / "metrics.jsonl").write_text("\n")
+    (damaged / "mesh" / "mesh_report.json").unlink()
+    (damaged / "mesh" / "mesh.png").write_bytes(b"not a picture")
+    (damaged / "export" / "export.json").unlink()
+    (damaged / "export" / "panorama" / "panorama_depth.png").unlink()
+    (damaged / "evaluate" / "evaluate.json").write_text("")
+
+    summary = run_report(damaged)
+    document = (damaged / "report" / "report.html").read_text(encoding="utf-8")
+    page = Page(document)
+    assert page.sections == list(STAGES) and page.open == []
+    assert summary["sections"] == dict.fromkeys(STAGES, "incomplete")
+    files = {"decode": "decode.json", "poses": "poses_report.json", "masks": "masks_report.json",
+             "train": "train_report.json", "mesh": "mesh_report.json", "export": "export.json",
+             "evaluate": "evaluate.json"}
+    for stage, name in files.items():
+        section = Page(_section(document, stage)).body
+        assert f"{damaged / stage / name} is missing or unreadable." in section, stage
+        assert f"{stage}/{name}" in " ".join(summary["problems"]), stage
+    section = {s: Page(_section(document, s)) for s in STAGES}
+    assert "decode/manifest.json is missing: the folder may be incomplete." in section["decode"].body
+    assert "mesh/mesh.png could not be read" in section["mesh"].body and "Mesh: mesh.ply" in section["mesh"].body
+    assert "metrics.jsonl has no rows." in section["train"].body and "Preview" in section["train"].body
+    assert len(section["poses"].images) == 1 and len(section["masks"].images) == 1, "poses.png, the contact sheet"
+    assert "export/panorama/panorama_depth.png is missing." in section["export"].body
+    assert len(section["export"].images) >= 1 + 2 * len(json.loads(
+        (results / "export" / "export.json").read_text())["environment_views"]), "the views found by their files"
+
+
+def test_a_section_that_cannot_be_built_and_poses_from_sfm(results, tmp_path):
+    """A report whose content is of the wrong kind stops only its own section; poses from SfM show their
+    figures, warnings and per-photo errors; a damaged metrics log is counted."""
+    odd = tmp_path / "tiny"
+    shutil.copytree(results, odd, ignore=shutil.ignore_patterns("report"))
+    masks = json.loads((odd / "masks" / "masks_report.json").read_text())
+    (odd / "masks" / "masks_report.json").write_text(json.dumps({**masks, "views": 5}))
+    poses = json.loads((odd / "poses" / "poses_report.json").read_text())
+    poses.update(source="sfm", features={"min": 10, "median": 20, "max": 30, "per_image": {"IMG_0001": 10}},
+                 mean_reprojection_error_px=0.73, models=[3, 1], not_registered=["IMG_0004"], pairs_matched=6,
+                 pairs_verified=5, reprojection_error_px_per_image={"IMG_0001": 0.5, "IMG_0002": 1.25})
+    (odd / "poses" / "poses_report.json").write_text(json.dumps(poses))
+    with (odd / "train" / "metrics.jsonl").open("a") as f:
+        f.write('{"step": 9, "lo\n')
+
+    summary = run_report(odd)
+    document = (odd / "report" / "report.html").read_text(encoding="utf-8")
+    page = Page(document)
+    assert page.sections == list(STAGES) and page.open == []
+    assert summary["sections"] == {**dict.fromkeys(STAGES, "present"), "masks": "incomplete", "train": "incomplete"}
+    assert summary["summaries"]["masks"] == "could not be read"
+    masks_section = Page(_section(document, "masks")).body
+    assert "This section could not be built: TypeError" in masks_section and "Folder" in masks_section
+    poses_section = Page(_section(document, "poses")).body
+    assert "cameras from SfM (pycolmap)" in poses_section and "image pairs matched / verified 6 / 5" in poses_section
+    assert "SfM split the photos into 2 models [3, 1]" in poses_section
+    assert "1 photo(s) without a camera: IMG_0004" in poses_section
+    assert "reprojection error per photo (2)" in poses_section and "IMG_0002 1.25" in poses_section
+    assert summary["summaries"]["poses"] == "4/4 registered, reprojection 0.73 px"
+    assert "1 line(s) of metrics.jsonl did not parse." in Page(_section(document, "train")).body
+    assert "train/metrics.jsonl: 1 line(s) did not parse" in summary["problems"]
+    assert len(Page(_section(document, "export")).images) >= 2, "the other sections are whole"
+
+
 def test_not_a_results_folder(tmp_path, tiny_capture):
     with pytest.raises(InputError, match="results folder not found") as e:
         run_report(tmp_path / "nowhere")
@@ -213,8 +290,6 @@ def test_not_a_results_folder(tmp_path, tiny_capture):
 
 def test_training_curves_from_a_long_metrics_log(tmp_path):
     """A long log (running mean drawn), NaN PSNRs, zero loss terms on log axes, and a damaged line."""
-    from pipeline.stages.report import figure_data_uri, read_metrics, training_curves
-
     lines = [json.dumps({"step": s, "seconds": 0.1 * s, "phase": "mask" if s <= 50 else "joint", "loss": 1 / s,
                          "psnr_object": float("nan") if s % 7 == 0 else 10 + s / 20, "beta": 0.1 / s, "lr": 1e-3,
                          "mask": 0.1, "photometric": 0.0 if s <= 50 else 0.05}) for s in range(1, 301)]
