@@ -57,7 +57,8 @@ class Picture:
 
 @dataclass(frozen=True)
 class Link:
-    """A file the page links to rather than embeds (``href`` relative to the page; None when it is missing)."""
+    """A file the page links to rather than embeds: ``href`` relative to the page, None when the file is missing;
+    ``path`` as the page prints it (relative to the results folder when missing); ``size`` in words, or empty."""
 
     href: str | None
     text: str
