@@ -41,6 +41,7 @@ IMAGE_KINDS = LINEAR, SRGB, CLIPPED = ("linear", "srgb", "clipped")  # a folder 
 CAMERAS_JSON = "cameras.json"  # also a capture's known cameras, and masks' re-normalized cameras
 TRANSFORMS_JSON = "transforms.json"
 SPARSE = "sparse"  # COLMAP binary model
+SFM_DATABASE = "database.db"  # COLMAP's, kept with poses.keep_database
 UNDISTORTED = "undistorted"
 POSES_REPORT = "poses_report.json"
 POSES_FIGURE = "poses.png"

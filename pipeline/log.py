@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import sys
+from collections.abc import Iterator
 
 from rich.console import Console
 from rich.logging import RichHandler
@@ -35,3 +37,24 @@ def progress() -> Progress:
         console=console,
         disable=not sys.stderr.isatty() or bool(os.environ.get("ORCA_NO_PROGRESS")),
     )
+
+
+class _Collector(logging.Handler):
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.messages: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.messages.append(record.getMessage())
+
+
+@contextlib.contextmanager
+def collect_warnings(logger: logging.Logger) -> Iterator[list[str]]:
+    """The warnings ``logger`` (and its children) log inside the block, for a stage's report: a person reads
+    the JSON, not the log."""
+    handler = _Collector()
+    logger.addHandler(handler)
+    try:
+        yield handler.messages
+    finally:
+        logger.removeHandler(handler)

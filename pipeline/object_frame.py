@@ -32,12 +32,30 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .alignment import Similarity
+from .cameras import Camera, CameraSet, Frame
+
+if TYPE_CHECKING:
+    import pycolmap  # noqa: TID251 - annotations only
 
 MIN_OBJECT_POINTS = 20
+
+
+@dataclass
+class Posed:
+    """Cameras in the source frame (COLMAP's, or a known-cameras file's) before normalization, one per
+    registered photo (name order)."""
+
+    names: list[str]
+    c2w: np.ndarray  # (N, 4, 4) OpenCV camera-to-world
+    lens: list[pycolmap.Camera]  # per photo: the full lens model (pinhole part and distortion), decoded size
+    points: np.ndarray | None  # (M, 3) sparse points with tracks of 3+ photos, or None
+    point_colors: np.ndarray | None  # (M, 3) uint8
+    stats: dict[str, Any]
 
 
 @dataclass(frozen=True)
@@ -300,3 +318,26 @@ def normalizing_similarity(sphere: ObjectSphere, c2w: np.ndarray) -> Similarity:
     x /= np.linalg.norm(x)
     y = np.cross(z, x)
     return Similarity(float(sphere.radius), np.stack([x, y, z], axis=1), np.asarray(sphere.center, float))
+
+
+def normalized_cameras(posed: Posed, K: np.ndarray, to_source: Similarity, image_of: dict[str, str]) -> CameraSet:
+    """The posed cameras in the normalized frame (``to_source``: normalized -> source frame, recorded as
+    ``frame.to_colmap``), pinhole ``K`` ``(N, 3, 3)``, images at ``image_of[name]``."""
+    c2w_n = to_source.inverse().apply_c2w(posed.c2w)
+    cams = [
+        Camera(name=n, image=image_of[n], width=int(c.width), height=int(c.height), fx=float(k[0, 0]),
+               fy=float(k[1, 1]), cx=float(k[0, 2]), cy=float(k[1, 2]), camera_to_world=m.tolist())
+        for n, c, k, m in zip(posed.names, posed.lens, K, c2w_n)
+    ]
+    return CameraSet(frame=Frame(to_colmap=to_source.matrix.tolist()), cameras=cams)
+
+
+def renormalized(cameras: CameraSet, centre: np.ndarray, radius: float) -> CameraSet:
+    """The cameras in the frame where the sphere ``(centre, radius)`` of theirs is the unit sphere:
+    ``x_old = radius * x_new + centre``; ``frame.to_colmap`` composed with it."""
+    to_old = Similarity(float(radius), np.eye(3), np.asarray(centre, float))
+    c2w = to_old.inverse().apply_c2w(cameras.c2w())
+    cams = [c.model_copy(update={"camera_to_world": m.tolist()}) for c, m in zip(cameras.cameras, c2w)]
+    to_colmap = cameras.frame.to_colmap
+    frame = Frame(to_colmap=(np.asarray(to_colmap) @ to_old.matrix).tolist() if to_colmap is not None else None)
+    return cameras.model_copy(update={"cameras": cams, "frame": frame})

@@ -6,6 +6,12 @@ so few photos register or the model splits in two. The remedies are the same eve
 textured surroundings, locked exposure, masks on the object) and every error here says which applies.
 
 Images are named ``<name>.png`` inside COLMAP (the decode stage's sRGB PNGs); callers map them back.
+
+Intrinsics: each lens/zoom (EXIF make, model, focal length) shares one camera (:func:`camera_groups`), SIMPLE_RADIAL
+unless configured, its focal length starting from the EXIF 35 mm-equivalent focal length when the photos record
+it; a calibration (``orca calibrate``) gives OPENCV intrinsics held fixed. Exhaustive matching up to
+``exhaustive_max_images`` photos, else each photo with its neighbours in name order (wrapping around: no
+vocabulary tree needed); the model with the most photos is used and a split is reported.
 """
 
 from __future__ import annotations
@@ -20,12 +26,19 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from . import imageio
 from .config import PosesConfig
 from .errors import InputError
+from .layout import SFM_DATABASE, SRGB
+from .log import progress
+from .mask_file import read_mask
+from .object_frame import Posed
 from .signals import import_pycolmap
 
 if TYPE_CHECKING:
     import pycolmap  # noqa: TID251 - annotations only
+
+    from .results import DecodeArtifacts
 
 log = logging.getLogger("orca.poses")
 
@@ -218,7 +231,7 @@ def run_sfm(
     seconds: dict[str, float] = {}
     folder = folder or image_dir
     names = [n for g in groups for n in g.names]
-    db_path = work / "database.db"
+    db_path = work / SFM_DATABASE
     threads = num_threads(config)
     pycolmap.set_random_seed(config.seed)
 
@@ -405,3 +418,125 @@ def _check_registered(result: SfmResult, names: list[str], config: PosesConfig, 
         folder,
         fix=FIX_OVERLAP + "; or, to accept fewer photos, lower poses.min_registered_fraction",
     )
+
+
+# ------------------------------------------------------------------------------------- from a capture to cameras
+
+
+def camera_groups(decoded: DecodeArtifacts, names: list[str], width: int, height: int, config: PosesConfig,
+                  calibration: tuple[str, list[float], Path] | None) -> list[CameraGroup]:
+    """One COLMAP camera per lens and zoom (EXIF make, model, focal length), with its intrinsics prior.
+
+    Args:
+        calibration: (COLMAP model, params at the decoded size, its file), from ``orca calibrate``.
+    """
+    if calibration is not None and config.camera_model in ("auto", "OPENCV"):
+        model, params, path = calibration
+        return [CameraGroup(tuple(names), model, tuple(params), f"calibration ({path})",
+                            fixed=not config.refine_calibration)]
+    if calibration is not None:
+        log.warning("poses.camera_model=%s: the capture's calibration is not used", config.camera_model)
+    model = "SIMPLE_RADIAL" if config.camera_model == "auto" else config.camera_model
+    exif = {im["name"]: im.get("exif") or {} for im in decoded.meta["images"]}
+    keys = {n: tuple(exif[n].get(k) for k in ("make", "model", "focal_length_mm", "focal_length_35mm"))
+            for n in names}
+    groups = []
+    for key in dict.fromkeys(keys[n] for n in names):
+        members = tuple(n for n in names if keys[n] == key)
+        f35 = key[3]
+        if f35:  # 35 mm-equivalent focal length: the long side of the photo spans 36 mm
+            f = f35 / 36.0 * max(width, height)
+            params, source = _model_params(model, f, width, height), f"EXIF 35 mm focal length {f35:g} mm (prior)"
+        else:
+            params, source = None, "no EXIF focal length: COLMAP's default guess (1.2 x the longest side)"
+        groups.append(CameraGroup(members, model, params, source))
+    if len(groups) > 1:
+        log.info("%d cameras (lens/zoom settings from EXIF): %s", len(groups),
+                 ", ".join(f"{len(g.names)} photos" for g in groups))
+    return groups
+
+
+def _model_params(model: str, f: float, width: int, height: int) -> tuple[float, ...]:
+    cx, cy = width / 2.0, height / 2.0
+    return {
+        "SIMPLE_PINHOLE": (f, cx, cy),
+        "PINHOLE": (f, f, cx, cy),
+        "SIMPLE_RADIAL": (f, cx, cy, 0.0),
+        "RADIAL": (f, cx, cy, 0.0, 0.0),
+        "OPENCV": (f, f, cx, cy, 0.0, 0.0, 0.0, 0.0),
+    }[model]
+
+
+def write_feature_masks(files: dict[str, Path], size: tuple[int, int], folder: Path, dilate_px: int) -> Path:
+    """COLMAP's feature masks (``<image>.png.png``, 0 = no features there) from object masks (white = object),
+    the object grown by ``dilate_px``."""
+    import cv2
+
+    folder.mkdir(parents=True)
+    r = dilate_px
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)) if r else None
+    for n, path in files.items():
+        obj = read_mask(path, size).astype(np.uint8)
+        if kernel is not None:
+            obj = cv2.dilate(obj, kernel)
+        imageio.write_png(folder / f"{colmap_name(n)}.png", np.where(obj > 0, 0, 255).astype(np.uint8))
+    return folder
+
+
+def posed_from_sfm(decoded: DecodeArtifacts, names: list[str], calibration: tuple[str, list[float], Path] | None,
+                   mask_files: dict[str, Path] | None, work: Path, config: PosesConfig,
+                   photo_dir: Path) -> tuple[Posed, pycolmap.Reconstruction]:
+    """The registered photos' cameras from SfM on the decoded sRGB images, features on the object ignored where
+    ``mask_files`` are given; and the reconstruction. ``work``: an empty folder to be (``database.db`` there)."""
+    width, height = (int(v) for v in decoded.meta["size"])
+    groups = camera_groups(decoded, names, width, height, config, calibration)
+    work.mkdir()
+    feature_masks = (write_feature_masks(mask_files, (width, height), work / "feature_masks", config.mask_dilate_px)
+                     if mask_files else None)
+    with progress() as bar:
+        sfm = run_sfm(decoded.folder / SRGB, groups, work, config, feature_masks=feature_masks, progress=bar,
+                      folder=photo_dir)
+    rec = sfm.reconstruction
+    by_name = {stem_of(im.name): im for im in rec.images.values() if im.has_pose}
+    posed_names = [n for n in names if n in by_name]
+    c2w = np.stack([_c2w(by_name[n]) for n in posed_names])
+    lens = [rec.cameras[by_name[n].camera_id] for n in posed_names]
+    reliable = [p for p in rec.points3D.values() if p.track.length() >= 3]
+    points = np.array([p.xyz for p in reliable]).reshape(-1, 3)
+    colors = np.array([p.color for p in reliable], np.uint8).reshape(-1, 3)
+    per_image_error = _per_image_reprojection_error(rec)
+    stats = {
+        "matcher": sfm.matcher,
+        "pairs_matched": sfm.num_pairs,
+        "pairs_verified": sfm.num_verified_pairs,
+        "models": sfm.model_sizes,
+        "other_models": sfm.other_models,
+        "features": {"min": min(sfm.features.values()), "median": int(np.median(list(sfm.features.values()))),
+                     "max": max(sfm.features.values()), "per_image": dict(sorted(sfm.features.items()))},
+        "points3D": rec.num_points3D(),
+        "mean_reprojection_error_px": float(rec.compute_mean_reprojection_error()),
+        "mean_track_length": float(rec.compute_mean_track_length()),
+        "mean_observations_per_image": float(rec.compute_mean_observations_per_reg_image()),
+        "reprojection_error_px_per_image": dict(sorted((stem_of(rec.images[i].name), e)
+                                                       for i, e in per_image_error.items())),
+        "camera_groups": [{"photos": len(g.names), "model": g.model, "intrinsics_from": g.source, "fixed": g.fixed}
+                          for g in groups],
+        "seconds": {k: round(v, 2) for k, v in sfm.seconds.items()},
+    }
+    return Posed(posed_names, c2w, lens, points, colors, stats), rec
+
+
+def _c2w(image: Any) -> np.ndarray:
+    """``(4, 4)`` OpenCV camera-to-world of a posed pycolmap image (COLMAP stores world-to-camera)."""
+    m = np.eye(4)
+    m[:3] = image.cam_from_world().matrix()
+    return np.linalg.inv(m)
+
+
+def _per_image_reprojection_error(rec: Any) -> dict[int, float]:
+    """Mean reprojection error (px) of each registered image's triangulated observations."""
+    sums: dict[int, list[float]] = {}
+    for p in rec.points3D.values():
+        for el in p.track.elements:
+            sums.setdefault(el.image_id, []).append(p.error)
+    return {i: float(np.mean(v)) for i, v in sums.items()}

@@ -263,11 +263,11 @@ def test_sigterm_stops_a_stage_that_loaded_pycolmap_like_ctrl_c(stage, signal_na
     shutil.copytree(capture / "ground_truth" / "masks", capture / "masks")  # the user's masks
     results = tmp_path / "results"
     args = ["poses", capture, "--decode", tiny_decode, "--out", results / "poses"]
-    held = "pipeline.stages.poses", "_figure"
+    held = "pipeline.stages.poses", "cameras_figure"
     if stage == "masks":
         run_poses(capture, tiny_decode, results / "poses", PosesConfig())
         args = ["masks", capture, "--poses", results / "poses", "--decode", tiny_decode, "--out", results / "masks"]
-        held = "pipeline.stages.masks", "_contact_sheet"
+        held = "pipeline.stages.masks", "contact_sheet"
     marker = tmp_path / "held"
     proc = subprocess.Popen([sys.executable, "-c", _HELD_ORCA, *held, str(marker), *map(str, args)],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)

@@ -31,7 +31,7 @@ from pipeline.masking.views import (
     spread,
 )
 from pipeline.metrics import iou
-from pipeline.stages.masks import find_user_masks
+from pipeline.user_masks import find_user_masks
 
 
 def disc_mask(h: int = 36, w: int = 48) -> np.ndarray:
@@ -397,8 +397,9 @@ def test_user_masks_follow_the_poses_stage_undistortion(tiny_capture, tiny_decod
 
     from pipeline.results import load_decode, load_masks
     from pipeline.stages.masks import run_masks
-    from pipeline.stages.poses import recorded_undistortion, run_poses
+    from pipeline.stages.poses import run_poses
     from pipeline.transforms import to_transforms
+    from pipeline.undistort import recorded_undistortion
 
     capture = tmp_path / "capture"
     capture.mkdir()

@@ -118,7 +118,7 @@ def test_transforms_json_round_trips_cameras(tmp_path):
 def test_undistort_map_sends_pinhole_pixels_to_where_the_lens_put_them():
     import pycolmap
 
-    from pipeline.stages.poses import undistort_map
+    from pipeline.undistort import undistort_map
 
     cam = pycolmap.Camera(model="OPENCV", width=80, height=60, params=[70.0, 71.0, 40.3, 29.8, -0.2, 0.05, 1e-3, -2e-3])
     mx, my, shift = undistort_map(cam)

@@ -1,0 +1,51 @@
+"""Between the photos' full size and the working size segmentation runs at: views reduced (area average), masks
+brought back up with their outline snapped to the photo's edges."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import cv2
+import numpy as np
+
+from ..errors import InputError
+from .views import View
+
+if TYPE_CHECKING:
+    from ..results import DecodeArtifacts
+
+
+def load_view(decoded: DecodeArtifacts, cam: Any, scale: float) -> View:
+    """One photo at the working size (``scale`` of the camera's size): sRGB, clipped highlights, intrinsics."""
+    srgb = decoded.srgb(cam.name)
+    if srgb.shape[:2] != (cam.height, cam.width):
+        raise InputError(f"image {cam.name} is {srgb.shape[1]}x{srgb.shape[0]} but its camera says "
+                         f"{cam.width}x{cam.height}", decoded.folder, fix="rerun poses on this decode folder")
+    size = (max(1, round(cam.width * scale)), max(1, round(cam.height * scale)))
+    clipped = decoded.clipped(cam.name)
+    K = cam.K.copy()
+    if scale != 1.0:
+        srgb = cv2.resize(srgb, size, interpolation=cv2.INTER_AREA)
+        clipped = cv2.resize(clipped.astype(np.uint8), size, interpolation=cv2.INTER_AREA) > 0
+        K[0] *= size[0] / cam.width  # pixel (0, 0) is the image corner: every entry scales
+        K[1] *= size[1] / cam.height
+    return View(cam.name, np.ascontiguousarray(srgb), K, cam.c2w, clipped)
+
+
+def full_size_mask(mask: np.ndarray, photo: np.ndarray) -> np.ndarray:
+    """A working-size mask ``(h, w)`` -> ``(H, W)`` bool at the photo's size, its outline snapped to the photo's
+    edges (guided filter of the upsampled mask, guide the photo, radius ~ the scale factor)."""
+    H, W = photo.shape[:2]
+    if mask.shape == (H, W):
+        return mask
+    soft = cv2.resize(mask.astype(np.float32), (W, H), interpolation=cv2.INTER_LINEAR)
+    radius = max(1, round(W / mask.shape[1]))
+    snapped = cv2.ximgproc.guidedFilter(photo.astype(np.float32) / 255.0, soft, radius, 1e-3)
+    return snapped > 0.5
+
+
+def reduce(mask: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """A full-size bool mask at the working ``shape`` (area average, then half)."""
+    if mask.shape == shape:
+        return mask
+    return cv2.resize(mask.astype(np.float32), (shape[1], shape[0]), interpolation=cv2.INTER_AREA) > 0.5
