@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import InputError
-from .layout import MANIFEST, stage_dir  # noqa: F401 - stage_dir: train, mesh, export, render, evaluate, report
+from .layout import MANIFEST
 
 log = logging.getLogger("orca")
 
