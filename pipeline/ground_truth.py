@@ -21,6 +21,7 @@ from .cameras import Camera, CameraSet, load_cameras, scaled_intrinsics
 from .downscale import block_all, block_mean, downscale_depth, downscale_mask, downscale_normals
 from .errors import InputError
 from .imageio import read_exr, read_image
+from .layout import CAMERAS_JSON, GROUND_TRUTH, SCENE_JSON
 from .props import Prop, points_from_depth, points_in_props
 from .results import read_stage_json
 from .synth.render import interior_mask
@@ -42,11 +43,11 @@ class GroundTruth:
 
     @cached_property
     def cameras(self) -> CameraSet:
-        return load_cameras(self.path("cameras.json"))
+        return load_cameras(self.path(CAMERAS_JSON))
 
     @cached_property
     def scene(self) -> dict[str, Any]:
-        return read_stage_json(self.path("scene.json"), "synth")
+        return read_stage_json(self.path(SCENE_JSON), "synth")
 
     @property
     def factor(self) -> float:
@@ -54,7 +55,7 @@ class GroundTruth:
         try:
             return float(self.scene["radiance_to_decoded"]["factor"])
         except (KeyError, TypeError, ValueError) as e:
-            raise InputError("scene.json has no radiance_to_decoded.factor", self.folder / "scene.json",
+            raise InputError("scene.json has no radiance_to_decoded.factor", self.folder / SCENE_JSON,
                              "regenerate the capture with a current `orca synth`") from e
 
     @cached_property
@@ -62,7 +63,7 @@ class GroundTruth:
         try:
             return [Prop.from_json(p) for p in self.scene.get("props", [])]
         except (KeyError, TypeError, ValueError) as e:
-            raise InputError(f"bad props entry: {e}", self.folder / "scene.json") from e
+            raise InputError(f"bad props entry: {e}", self.folder / SCENE_JSON) from e
 
     @property
     def object_centre(self) -> np.ndarray | None:
@@ -76,7 +77,7 @@ class GroundTruth:
 
     @property
     def scene_path(self) -> Path:
-        return self.folder / "scene.json"
+        return self.folder / SCENE_JSON
 
     def object_mesh(self) -> Path:
         name = self.scene.get("object", {}).get("mesh", "object.ply") if self.scene_path.is_file() else "object.ply"
@@ -89,11 +90,11 @@ class GroundTruth:
 
     @property
     def has_environment(self) -> bool:
-        return (self.folder / "environment" / "cameras.json").is_file()
+        return (self.folder / "environment" / CAMERAS_JSON).is_file()
 
     @cached_property
     def environment_cameras(self) -> CameraSet:
-        return load_cameras(self.path("environment", "cameras.json",
+        return load_cameras(self.path("environment", CAMERAS_JSON,
                                       fix="pass --no-environment, or regenerate the capture with `orca synth`"))
 
     def exr(self, *parts: str) -> np.ndarray:
@@ -158,11 +159,11 @@ def _check_size(image: np.ndarray, cam: Camera, path: Path) -> None:
 def resolve_ground_truth(path: Path) -> GroundTruth:
     """A ``ground_truth/`` folder, or a capture folder holding one."""
     path = Path(path)
-    if not (path / "cameras.json").is_file() and (path / "ground_truth" / "cameras.json").is_file():
-        path = path / "ground_truth"
+    if not (path / CAMERAS_JSON).is_file() and (path / GROUND_TRUTH / CAMERAS_JSON).is_file():
+        path = path / GROUND_TRUTH
     if not path.is_dir():
         raise InputError("ground-truth folder not found", path, "pass a synthetic capture's ground_truth/ folder")
-    if not (path / "cameras.json").is_file():
+    if not (path / CAMERAS_JSON).is_file():
         raise InputError("not a ground-truth folder (no cameras.json)", path,
                          "pass the ground_truth/ folder of a capture made by `orca synth`")
     return GroundTruth(path)

@@ -8,13 +8,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .artifacts import MANIFEST, read_json
+from .artifacts import read_json
 from .cameras import CameraSet, load_cameras
 from .checkpoints import CHECKPOINT_FORMAT, load_checkpoint, load_weights
 from .config import TrainConfig
 from .errors import InputError, OrcaError
+from .layout import MANIFEST, MODEL
 
-FINAL_WEIGHTS = "model.pt"
+FINAL_WEIGHTS = MODEL
 
 
 def model_spec(cfg: TrainConfig):

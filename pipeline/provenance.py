@@ -15,8 +15,9 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from .artifacts import MANIFEST, file_sha256, read_json
+from .artifacts import file_sha256, read_json
 from .errors import InputError
+from .layout import MANIFEST
 from .raw import PHOTO_SUFFIXES
 
 log = logging.getLogger("orca")

@@ -25,13 +25,14 @@ def write_untrained_train_dir(folder: Path, seed: int = 0, cameras: Path | None 
     from orca.model import OrcaModel
     from pipeline.artifacts import write_manifest
     from pipeline.config import load_config
-    from pipeline.model_io import FINAL_WEIGHTS, model_spec, save_model
+    from pipeline.layout import MODEL
+    from pipeline.model_io import model_spec, save_model
 
     cfg = load_config(preset="fast", overrides=TINY_MODEL).train
     torch.manual_seed(seed)
     model = OrcaModel(model_spec(cfg))
     folder.mkdir(parents=True, exist_ok=True)
-    save_model(folder / FINAL_WEIGHTS, model, cfg, step=0)
+    save_model(folder / MODEL, model, cfg, step=0)
     (folder / "config.json").write_text(cfg.model_dump_json(indent=2) + "\n", encoding="utf-8")
     if cameras is not None:
         write_manifest(folder, stage="train", inputs={"cameras": cameras}, config=cfg.model_dump())

@@ -42,16 +42,15 @@ from ..evaluation import (
 )
 from ..figures import environment_grid, object_grid
 from ..ground_truth import GroundTruth, resolve_ground_truth
+from ..layout import CAMERAS_JSON, EVALUATE_JSON, MANIFEST, MESH, MESH_PLY, MODEL, POSES, TRAIN
 from ..log import console, progress
 from ..metrics import mesh_errors
-from ..model_io import FINAL_WEIGHTS
 from ..props import PROP_MARGIN
 from ..provenance import FORCE_HELP, common_capture
 from ..rendering import load_renderer, render_environment_view, render_object_view, write_views
 
 log = logging.getLogger("orca.evaluate")
 
-EVALUATE_JSON = "evaluate.json"
 GRID_OBJECT_VIEWS = 4
 
 
@@ -108,7 +107,7 @@ def evaluate_views(model, gt: GroundTruth, align: Similarity, views: int | Seque
 def _train_cameras(train_dir: Path) -> dict[str, Any]:
     """The train manifest's record of the cameras.json it was trained with (``path``, ``sha256``), or {}."""
     try:
-        record = read_json(train_dir / "manifest.json")["inputs"]["cameras"]
+        record = read_json(train_dir / MANIFEST)["inputs"]["cameras"]
     except (OSError, KeyError, TypeError, ValueError):
         return {}
     return record if isinstance(record, dict) else {}
@@ -149,17 +148,17 @@ def run_evaluate(
                          fix="drop --no-object or --no-environment")
     if downscale < 1:
         raise InputError(f"--downscale must be at least 1, got {downscale}")
-    weights = train_dir / FINAL_WEIGHTS
+    weights = train_dir / MODEL
     if not weights.is_file():
         raise InputError("no trained model here", weights, "run `orca train` first (it writes model.pt when done)")
     gt = resolve_ground_truth(gt_dir)
     if environment and not gt.has_environment:
-        raise InputError("the ground truth has no environment views", gt.folder / "environment" / "cameras.json",
+        raise InputError("the ground truth has no environment views", gt.folder / "environment" / CAMERAS_JSON,
                          "pass --no-environment, or regenerate the capture with `orca synth`")
     if mesh is not None and not Path(mesh).is_file():
         raise InputError("mesh not found", mesh, "run `orca mesh` first, or drop --mesh")
     recorded = _train_cameras(train_dir)
-    trained_on_gt = recorded["sha256"] == file_sha256(gt.folder / "cameras.json") if "sha256" in recorded else None
+    trained_on_gt = recorded["sha256"] == file_sha256(gt.folder / CAMERAS_JSON) if "sha256" in recorded else None
     if cameras is None and isinstance(recorded.get("path"), str) and Path(recorded["path"]).is_file():
         cameras = Path(recorded["path"])
     cameras = Path(cameras) if cameras is not None else None
@@ -177,7 +176,7 @@ def run_evaluate(
             matrix = fitted.matrix
     elif trained_on_gt is False and to_ground_truth is None:
         log.warning("the model was trained with other cameras than %s; without them (--cameras) its frame may "
-                    "differ from the ground truth's and the figures will be meaningless", gt.folder / "cameras.json")
+                    "differ from the ground truth's and the figures will be meaningless", gt.folder / CAMERAS_JSON)
     align = Similarity.from_matrix(matrix)
     model = load_renderer(train_dir, device)
     log.info("evaluate: %s against %s (downscale %d)", train_dir, gt.folder, downscale)
@@ -201,7 +200,7 @@ def run_evaluate(
         results["created"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
         results = json_safe(results)
         write_json(tmp / EVALUATE_JSON, results)
-        inputs = {"model": weights, "cameras": gt.folder / "cameras.json", "scene": gt.scene_path,
+        inputs = {"model": weights, "cameras": gt.folder / CAMERAS_JSON, "scene": gt.scene_path,
                   **({"result_cameras": cameras} if cameras is not None else {}),
                   **({"mesh": Path(mesh)} if mesh is not None else {})}
         write_manifest(tmp, stage="evaluate", inputs=inputs, started=started,
@@ -260,13 +259,13 @@ def resolve_results(path: Path) -> tuple[Path, Path | None, Path | None]:
     """``(train_dir, cameras, mesh)`` of a train folder (no cameras or mesh implied), or of a capture's results
     folder (``train/``, ``poses/cameras.json`` and ``mesh/mesh.ply`` where they exist)."""
     path = Path(path)
-    if (path / "model.pt").is_file() or not (path / "train" / "model.pt").is_file():
+    if (path / MODEL).is_file() or not (path / TRAIN / MODEL).is_file():
         return path, None, None
 
     def found(p: Path) -> Path | None:
         return p if p.is_file() else None
 
-    return path / "train", found(path / "poses" / "cameras.json"), found(path / "mesh" / "mesh.ply")
+    return path / TRAIN, found(path / POSES / CAMERAS_JSON), found(path / MESH / MESH_PLY)
 
 
 def main(args: argparse.Namespace) -> dict[str, Any]:

@@ -47,9 +47,10 @@ from ..cameras import Camera, CameraSet, save_cameras, select_views
 from ..config import ExportConfig, add_config_arguments, config_from_arguments
 from ..errors import InputError
 from ..imageio import to_srgb8, write_png
+from ..layout import CAMERAS_JSON, MODEL
 from ..log import progress
 from ..media import depth_scale, normal_png, overview, write_environment_view, write_point_cloud, write_video
-from ..model_io import FINAL_WEIGHTS, training_cameras
+from ..model_io import training_cameras
 from ..object_frame import camera_up
 from ..panorama import (
     environment_cameras,
@@ -85,7 +86,7 @@ def run_export(train_dir: Path, out_dir: Path, cfg: ExportConfig | None = None, 
     started = time.time()
     cfg = cfg if cfg is not None else ExportConfig()
     train_dir, out_dir = Path(train_dir), Path(out_dir)
-    weights = train_dir / FINAL_WEIGHTS
+    weights = train_dir / MODEL
     if not weights.is_file():
         raise InputError("no trained model here", weights, "run `orca train` first (it writes model.pt when done)")
     capture = common_capture([train_dir, cameras], force=True)  # --cameras of another capture: a warning
@@ -134,7 +135,7 @@ def run_export(train_dir: Path, out_dir: Path, cfg: ExportConfig | None = None, 
             env_views[cam.name] = render_environment_view(model, cam)
             write_environment_view(tmp / "environment", cam.name, env_views[cam.name], scale)
             bar.advance(task)
-        save_cameras(tmp / "environment" / "cameras.json", CameraSet(cameras=[
+        save_cameras(tmp / "environment" / CAMERAS_JSON, CameraSet(cameras=[
             c.model_copy(update={"image": f"{c.name}_rgb.exr"}) for c in env_cams]))
         timing["environment_views"] = time.time() - t
 

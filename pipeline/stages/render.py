@@ -22,8 +22,8 @@ from typing import Any
 from ..artifacts import atomic_dir, write_manifest
 from ..cameras import CameraSet, load_cameras, save_cameras
 from ..errors import InputError
+from ..layout import MODEL
 from ..log import progress
-from ..model_io import FINAL_WEIGHTS
 from ..provenance import common_capture
 from ..rendering import (
     load_renderer,
@@ -60,7 +60,7 @@ def run_render(
             bar.advance(task)
         save_cameras(tmp / "views.json", CameraSet(frame=cameras.frame, cameras=[
             rendered_camera(c, downscale, f"{c.name}_rgb.exr") for c in cameras.cameras]))
-        write_manifest(tmp, stage="render", inputs={"model": Path(train_dir) / FINAL_WEIGHTS, "cameras": cameras_path},
+        write_manifest(tmp, stage="render", inputs={"model": Path(train_dir) / MODEL, "cameras": cameras_path},
                        config={"environment": environment, "downscale": downscale}, started=started,
                        capture=common_capture([train_dir]))  # any cameras may be rendered: not checked
     log.info("rendered %d %s view(s) -> %s (%.1f s)", len(cameras), "environment" if environment else "object",

@@ -49,10 +49,11 @@ from typing import Any, Literal
 
 import numpy as np
 
-from ..artifacts import MANIFEST, atomic_dir, write_json, write_manifest
+from ..artifacts import atomic_dir, write_json, write_manifest
 from ..cameras import CameraSet, Frame, save_cameras
 from ..errors import InputError
 from ..imageio import to_srgb8, write_exr, write_png
+from ..layout import CAMERAS_JSON, CAPTURE_YAML, GROUND_TRUTH, MANIFEST
 from ..log import progress
 from ..provenance import capture_record
 from . import build, geometry
@@ -128,7 +129,7 @@ class SynthOptions:
             raise InputError("invalid synth options: " + "; ".join(problems))
 
 
-GT = "ground_truth"
+GT = GROUND_TRUTH
 LAYOUT = {
     "cameras": f"{GT}/cameras.json",
     "scene": f"{GT}/scene.json",
@@ -519,11 +520,11 @@ def render_capture(scene: str | SceneSpec, out_dir: str | Path, options: SynthOp
 
         save_cameras(tmp / LAYOUT["cameras"], CameraSet(
             frame=Frame(), cameras=[v.camera(f"../{p['image']}") for v, p in zip(views, photos)]))
-        save_cameras(tmp / LAYOUT["environment"] / "cameras.json", CameraSet(
+        save_cameras(tmp / LAYOUT["environment"] / CAMERAS_JSON, CameraSet(
             frame=Frame(), cameras=[v.camera(f"rgb/{v.name}.exr") for v in env_views]))
         factor = decoded_scale(gain, reference, SensorModel())
         # What a person who knows the material would write: the coat's index of refraction (Fresnel).
-        (tmp / "capture.yaml").write_text(
+        (tmp / CAPTURE_YAML).write_text(
             f"# Settings for this capture (see pipeline/config.py); written by orca synth.\n"
             f"train:\n  ior: {spec.object.int_ior}  # the object's coat (plastic, glaze)\n", encoding="utf-8")
         write_json(tmp / LAYOUT["scene"], _scene_json(
