@@ -12,6 +12,8 @@ from collections.abc import Callable
 
 import torch
 
+from .geometry_utils import safe_normalize
+
 SDF = Callable[[torch.Tensor], torch.Tensor]
 """An SDF: ``(N, 3)`` points -> ``(N,)`` signed distances."""
 
@@ -35,11 +37,6 @@ def gradient(sdf: SDF, x: torch.Tensor, create_graph: bool = True) -> tuple[torc
     return f, g
 
 
-def normalize(v: torch.Tensor) -> torch.Tensor:
-    """``(..., 3)`` vectors to unit length, safe at zero."""
-    return v / v.norm(dim=-1, keepdim=True).clamp_min(_GRAD_EPS)
-
-
 def normals_and_curvature_autograd(sdf: SDF, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Unit normals and mean curvature H = ½ div(∇f/|∇f|) by autograd (differentiable).
 
@@ -51,7 +48,7 @@ def normals_and_curvature_autograd(sdf: SDF, x: torch.Tensor) -> tuple[torch.Ten
     with torch.enable_grad():
         x = x if x.requires_grad else x.detach().requires_grad_(True)
         _, g = gradient(sdf, x, create_graph=True)
-        n = normalize(g)
+        n = safe_normalize(g, _GRAD_EPS)
         div = torch.zeros(x.shape[0], dtype=x.dtype, device=x.device)
         if n.requires_grad:  # an affine SDF (a plane) has a constant normal and no second derivatives
             for i in range(3):
@@ -94,4 +91,4 @@ def normals_and_curvature_fd(sdf: SDF, x: torch.Tensor, eps: float) -> tuple[tor
     trace = hess_diag.sum(-1)
     ghg = torch.einsum("ni,nij,nj->n", g, hess, g)
     div = (gn2 * trace - ghg) / gn2.pow(1.5)
-    return normalize(g), 0.5 * div
+    return safe_normalize(g, _GRAD_EPS), 0.5 * div

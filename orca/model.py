@@ -14,8 +14,9 @@ from typing import Literal, NamedTuple
 import torch
 from torch import nn
 
-from .differential import gradient, normalize
+from .differential import gradient
 from .fields import EnvironmentField, EnvironmentFieldSpec, SDFField, SDFFieldSpec
+from .geometry_utils import safe_normalize
 from .losses import (
     cone_distortion_loss,
     eikonal_loss,
@@ -174,7 +175,7 @@ def objective(
         "eikonal": eikonal_loss(out.sdf_grad),
     }
     if phase == "joint":
-        normals = normalize(out.sdf_grad)
+        normals = safe_normalize(out.sdf_grad)
         # The surface's colour (radiance per unit opacity): otherwise the quickest way to darken a too-bright
         # start is to thin the surface, and the photometric term fights the silhouettes the mask term learns.
         surface_rgb = out.rgb / out.opacity.clamp_min(_OPACITY_EPS)[:, None]
@@ -213,5 +214,5 @@ def smoothness_term(model: OrcaModel, batch: Batch, out: RayOutputs, step: float
     surface = surface.detach()
     nearby = surface + step * torch.randn_like(surface)
     _, g = gradient(model.sdf_field.sdf, torch.cat([surface, nearby]), create_graph=True)
-    n_surface, n_nearby = normalize(g).chunk(2)
+    n_surface, n_nearby = safe_normalize(g).chunk(2)
     return normal_smoothness_loss(n_surface, n_nearby, out.opacity.detach())

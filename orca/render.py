@@ -19,9 +19,10 @@ import torch
 
 from .cones import Method as ConeMethod
 from .cones import virtual_cone
-from .differential import normalize, normals_and_curvature_fd
+from .differential import normals_and_curvature_fd
 from .fields import EnvironmentField, SDFField
 from .frustum import conical_frustum_gaussian
+from .geometry_utils import safe_normalize
 from .sampling import ray_sphere_bounds, sample_pdf, surface_band, upsample_to_surface
 from .volume import composite_weights, quantile_depth, volsdf_density
 
@@ -319,7 +320,7 @@ def render_rays(
     w, _ = composite_weights(density, t)
     opacity = w.sum(-1)
     diffuse = (w[..., None] * sdf_field.diffuse(flat, feats).reshape(n, s_count, 3)).sum(-2)
-    normals = normalize(grad).reshape(n, s_count, 3)
+    normals = safe_normalize(grad).reshape(n, s_count, 3)
     normal_map = (w[..., None] * normals).sum(-2)
     depth = (w * mid).sum(-1)
 
