@@ -53,8 +53,9 @@ def parity(preset: str, rays: int) -> dict:
     weights = loss_weights(cfg)
     g = torch.Generator().manual_seed(0)
     data = synthetic_images(torch.device("cpu"))
-    batch = data.sample(rays, cfg.object_fraction, g)
-    background = data.sample_background(max(cfg.background_rays // 4, 1), g) if cfg.background_rays else None
+    batch = data.sample(rays, cfg.sampler.object_fraction, g)
+    background = (data.sample_background(max(cfg.sampler.background_rays // 4, 1), g)
+                  if cfg.sampler.background_rays else None)
 
     results = {}
     for name, model in (("cpu", cpu_model), ("cuda", cuda_model)):

@@ -63,9 +63,9 @@ def bench_preset(preset: str, device: torch.device, steps: int, warmup: int) -> 
             torch.cuda.synchronize()
 
     def step() -> None:
-        batch = data.sample(cfg.batch_rays, cfg.object_fraction, g)
+        batch = data.sample(cfg.batch_rays, cfg.sampler.object_fraction, g)
         # the off-object rays of the environment field, as `orca train` draws them every iteration
-        background = data.sample_background(cfg.background_rays, g) if cfg.background_rays else None
+        background = data.sample_background(cfg.sampler.background_rays, g) if cfg.sampler.background_rays else None
         total, _, _ = objective(model, batch, weights, "joint", background)
         optimizer.zero_grad(set_to_none=True)
         total.backward()
@@ -95,7 +95,7 @@ def bench_preset(preset: str, device: torch.device, steps: int, warmup: int) -> 
         sync()
         render_s = (time.perf_counter() - t0) / max(steps // 2, 1)
     return {
-        "preset": preset, "batch_rays": cfg.batch_rays, "background_rays": cfg.background_rays,
+        "preset": preset, "batch_rays": cfg.batch_rays, "background_rays": cfg.sampler.background_rays,
         "iterations": cfg.iterations,
         "seconds_per_iteration": per_step, "train_rays_per_second": cfg.batch_rays / per_step,
         "render_rays_per_second": cfg.batch_rays / render_s,

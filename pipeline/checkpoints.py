@@ -4,8 +4,8 @@ loading.
 A checkpoint folder holds ``step_XXXXXXX.pt`` files (model, optimizer and scheduler state, the config, the
 training identity, the training time so far), the live metrics log, previews and tensorboard events. A
 checkpoint is resumed only under the same identity (:func:`training_identity`): the same config but for the
-keys that do not change what the iterations compute, and the same data. Other sets are moved aside, never
-deleted (:func:`supersede_checkpoints`).
+keys that do not change what the iterations compute (``RESUME_NEUTRAL_KEYS``), and the same data. Other sets
+are moved aside, never deleted (:func:`supersede_checkpoints`).
 """
 
 from __future__ import annotations
@@ -20,8 +20,10 @@ import time
 from pathlib import Path
 from typing import Any
 
+from pydantic import ValidationError
+
 from .artifacts import atomic_path
-from .config import TrainConfig
+from .config import TrainConfig, dotted
 from .errors import InputError
 
 log = logging.getLogger("orca.train")
@@ -34,12 +36,12 @@ TENSORBOARD = "tb"
 # what a checkpoint folder holds: checkpoints (and atomic_path's temporary files), the live logs and previews
 _CHECKPOINT_ENTRY = re.compile(rf"\.?step_\d+\.pt.*|{TENSORBOARD}|{PREVIEWS}|{re.escape(METRICS)}")
 
-# Config keys that do not change what the iterations compute: checkpoints made under other values resume.
-# (`iterations` may change too: a finished run extended, or a time-boxed one cut short, goes on from its last
-# checkpoint, with the learning-rate schedule of the new length from there.)
+# Train config keys (dotted) that do not change what the iterations compute: checkpoints made under other
+# values resume. (`iterations` may change too: a finished run extended, or a time-boxed one cut short, goes on
+# from its last checkpoint, with the learning-rate schedule of the new length from there.)
 RESUME_NEUTRAL_KEYS = frozenset({
-    "iterations", "checkpoint_every", "preview_every", "preview_downscale", "log_every", "keep_checkpoints",
-    "device", "env_fine_render", "env_depth_quantile",
+    "iterations", "device", "logging.checkpoint_every", "logging.preview_every", "logging.preview_downscale",
+    "logging.log_every", "logging.keep_checkpoints", "render.env_fine_render", "render.depth_quantile",
 })
 
 
@@ -136,9 +138,10 @@ def load_weights(model, state: dict[str, Any], path: Path) -> None:
 
 
 def training_identity(cfg: TrainConfig, data) -> dict[str, Any]:
-    """What a checkpoint's iterations depend on: the config (but the keys of ``RESUME_NEUTRAL_KEYS``) and a
-    hash of the training data (images, masks, clipped pixels, cameras, sparse depth) as the model sees them."""
-    config = {k: v for k, v in cfg.model_dump(mode="json").items() if k not in RESUME_NEUTRAL_KEYS}
+    """What a checkpoint's iterations depend on: the config (all of it; :func:`identity_changes` leaves out
+    ``RESUME_NEUTRAL_KEYS``) and a hash of the training data (images, masks, clipped pixels, cameras, sparse
+    depth) as the model sees them."""
+    config = cfg.model_dump(mode="json")
     digest = hashlib.sha256()
     depth = () if data.depth is None else (data.depth.image, data.depth.uv, data.depth.distance)
     for tensor in (data.images, data.masks, data.valid, data.K, data.c2w, *depth):
@@ -151,12 +154,20 @@ def identity_changes(saved: dict[str, Any] | None, current: dict[str, Any]) -> l
     """Why a checkpoint of identity ``saved`` cannot be resumed under ``current`` (empty: it can)."""
     if not saved:
         return ["it records no config or data (an older version)"]
-    keys = [f"train.{k}" for k in sorted(set(saved["config"]) | set(current["config"]))
-            if saved["config"].get(k) != current["config"].get(k)]
+    try:  # an earlier version's identity holds its own keys, some since moved, the neutral ones left out
+        before, now = (_compared(TrainConfig.model_validate(i["config"])) for i in (saved, current))
+    except ValidationError:
+        return ["its config is not one this version reads"]
+    keys = [f"train.{k}" for k in sorted(set(before) | set(now)) if before.get(k) != now.get(k)]
     changes = [f"{', '.join(keys)} changed"] if keys else []
     if saved.get("data") != current["data"]:
         changes.append("the images, masks or cameras changed")
     return changes
+
+
+def _compared(cfg: TrainConfig) -> dict[str, Any]:
+    """The config values a checkpoint's identity compares, as dotted keys."""
+    return {k: v for k, v in dotted(cfg.model_dump(mode="json")).items() if k not in RESUME_NEUTRAL_KEYS}
 
 
 def supersede_checkpoints(ckpt_dir: Path, reasons: list[str]) -> Path:

@@ -1,7 +1,10 @@
 """The pipeline's configuration: one validated model, presets by name, YAML files and CLI overrides.
 
 Unknown keys and bad values are errors (pydantic ``extra="forbid"``), never silence. A config is built as
-``defaults <- preset <- capture.yaml <- --config FILE <- --set key=value``, later layers winning.
+``defaults <- preset <- capture.yaml <- --config FILE <- --set key=value``, later layers winning. A preset is
+a YAML file of ``pipeline/presets/`` (its name the file's stem). The train section is nested per component
+of the model (``train.sdf``, ``train.environment``, ``train.render``, ...); its earlier flat keys
+(:data:`MOVED`) still work, with a warning naming the new key.
 """
 
 from __future__ import annotations
@@ -10,6 +13,7 @@ import copy
 import difflib
 import hashlib
 import json
+import logging
 from pathlib import Path
 from typing import Any, Literal, TypeVar
 
@@ -17,6 +21,8 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from .errors import ConfigError, validation_problem
+
+log = logging.getLogger("orca.config")
 
 
 class StrictModel(BaseModel):
@@ -258,16 +264,112 @@ class LossConfig(StrictModel):
     smoothness_step: float = Field(0.01, gt=0, description="that step's standard deviation (object radii)")
 
 
-class TrainConfig(StrictModel):
-    """Training the ORCa model (``orca train``). Sizes default to the ``standard`` preset."""
+class HashGridConfig(StrictModel):
+    """A multiresolution hash grid (``orca.encoding.HashGridSpec``); these defaults are the SDF's."""
 
-    iterations: int = Field(20000, ge=1)
-    batch_rays: int = Field(2048, ge=8)
-    mask_warmup: int = Field(1000, ge=0, description="iterations of silhouette-only training first")
-    lr: float = Field(5e-3, gt=0)
-    lr_final_ratio: float = Field(0.05, gt=0, le=1, description="exponential decay to lr x ratio at the end")
-    grad_clip: float = Field(1.0, gt=0)
-    object_fraction: float = Field(0.5, ge=0, le=1, description="share of rays drawn from object pixels")
+    levels: int = Field(12, ge=1)
+    log2_table_size: int = Field(16, ge=8, le=24)
+    max_resolution: int = Field(1024, ge=16)
+
+
+class TextureGridConfig(HashGridConfig):
+    """The diffuse head's own hash grid: texture detail that need not come from the SDF's grid."""
+
+    levels: int = Field(12, ge=0, description="0: none (the diffuse colour from the SDF's features, as the paper)")
+    log2_table_size: int = Field(17, ge=8, le=24)
+    max_resolution: int = Field(2048, ge=16)
+
+
+class EnvironmentGridConfig(HashGridConfig):
+    """The environment field's hash grid (over the contracted space)."""
+
+    log2_table_size: int = Field(17, ge=8, le=24)
+
+
+class SDFConfig(StrictModel):
+    """The object's SDF field (``orca.fields.SDFFieldSpec``) and the schedules of its grid and its density's β
+    (``orca.model.ModelSpec``)."""
+
+    encoding: Literal["hashgrid", "frequency"] = "hashgrid"
+    hidden: int = Field(64, ge=8)
+    layers: int = Field(2, ge=1)
+    init_radius: float = Field(0.7, gt=0, description="the SDF starts as a sphere of this radius")
+    hash_grid: HashGridConfig = Field(default_factory=HashGridConfig)
+    texture_grid: TextureGridConfig = Field(default_factory=TextureGridConfig)
+    levels_start: int = Field(4, ge=1, description="coarse-to-fine: hash-grid levels active at the start")
+    levels_full: float = Field(0.3, ge=0, le=1, description="fraction of training after which all levels are active")
+    beta_init: float = Field(0.05, gt=0, description="VolSDF's β (the density's sharpness) at the start")
+    beta_final: float = Field(0.005, gt=0, description="β is capped by a schedule from beta_init to this")
+    beta_anneal: float = Field(0.5, ge=0, le=1, description="fraction of training at which the cap reaches beta_final")
+
+
+class EnvironmentConfig(StrictModel):
+    """The 5D environment field (``orca.fields.EnvironmentFieldSpec``)."""
+
+    encoding: Literal["hashgrid", "ipe", "direction"] = Field(
+        "hashgrid", description="'direction': the 2D environment map ablation (radiance from direction only)"
+    )
+    hidden: int = Field(64, ge=8)
+    layers: int = Field(2, ge=1)
+    hash_grid: EnvironmentGridConfig = Field(default_factory=EnvironmentGridConfig)
+    dir_freqs: int = Field(
+        2, ge=0, le=8, description="frequencies of the view direction in the environment's radiance (0: none)"
+    )
+    contract_radius: float = Field(
+        3.0, gt=0, description="the environment's contraction is the identity inside this radius (object radii)"
+    )
+    density_bias: float = Field(
+        -3.0, description="added to the environment field's density before softplus: how empty it starts"
+    )
+
+
+class RenderConfig(StrictModel):
+    """Samples along primary rays and virtual cones (``orca.render.RenderSpec``)."""
+
+    object_radius: float = Field(
+        1.2, gt=0, description="primary rays are sampled inside this sphere, which the SDF's grid covers (the object "
+        "is in the unit sphere)"
+    )
+    n_coarse: int = Field(48, ge=4)
+    n_fine: int = Field(32, ge=0)
+    upsample_steps: int = Field(4, ge=1, description="rounds of coarse-to-fine search for the surface")
+    band_samples: int = Field(
+        32, ge=0, description="rendered samples in a band around the surface; 0: render every coarse and fine sample"
+    )
+    cone_samples: int = Field(2, ge=1, description="top-weight primary samples that cast virtual cones")
+    cone_method: Literal["closed_form", "bounding_rays", "naive"] = "closed_form"
+    env_samples: int = Field(48, ge=4, description="coarse samples along each virtual cone (log-spaced)")
+    env_fine: int = Field(32, ge=0, description="more samples from the coarse pass's weights (0: one pass)")
+    env_fine_render: int = Field(
+        128, ge=0, description="env_fine when a trained model renders (evaluate, export, render): one fixed set of "
+        "samples per view, where training draws new ones every step; too few step through thin props"
+    )
+    depth_quantile: float = Field(
+        0.3, gt=0, lt=1, description="an environment ray's depth (export, evaluate, render): where its accumulated "
+        "weight reaches this share of the total (0.5: the median); lower reads the first surface that takes a good "
+        "part of it, where a prop left semi-transparent sits (docs/method.md)"
+    )
+    env_near: float = Field(0.05, gt=0, description="first environment sample past a cone's start (object radii)")
+    env_far: float = Field(
+        100.0, gt=0, description="last environment sample (object radii; the contraction keeps it finite)"
+    )
+    env_far_from_points: float = Field(
+        1.25, ge=0, description="with sparse points (`--points`), env_far becomes this times the farthest a photo "
+        "saw a point (0: keep env_far)"
+    )
+    ior: float = Field(1.5, gt=1, description="index of refraction of the glossy coating (Fresnel)")
+
+    @model_validator(mode="after")
+    def _environment_range(self) -> RenderConfig:
+        if self.env_far <= self.env_near:
+            raise ValueError(f"env_far ({self.env_far}) must exceed env_near ({self.env_near})")
+        return self
+
+
+class SamplerConfig(StrictModel):
+    """The rays each iteration draws besides ``batch_rays`` (``orca.data.ImageSet``)."""
+
+    object_fraction: float = Field(0.5, ge=0, le=1, description="share of the batch's rays drawn from object pixels")
     background_rays: int = Field(
         2048, ge=0, description="extra off-object rays per iteration for the environment field (cheap: no SDF)"
     )
@@ -277,91 +379,46 @@ class TrainConfig(StrictModel):
         "by default: it helped an environment-only fit but not joint training (docs/method.md)"
     )
     depth_rays: int = Field(512, ge=0, description="rays through sparse points per iteration (losses.sparse_depth)")
-    env_far_from_points: float = Field(
-        1.25, ge=0, description="with sparse points (`--points`), env_far becomes this times the farthest a photo "
-        "saw a point (0: keep env_far)"
-    )
     depth_object_margin_px: int = Field(
         4, ge=0, description="a sparse point seen this close to the object's mask in any photo is not used"
     )
-    checkpoint_every: int = Field(500, ge=1)
+
+
+class LoggingConfig(StrictModel):
+    """What a run writes as it goes into its checkpoint folder."""
+
+    log_every: int = Field(50, ge=1, description="metrics.jsonl and tensorboard, every this many iterations")
     preview_every: int = Field(1000, ge=1)
     preview_downscale: int = Field(4, ge=1)
-    log_every: int = Field(50, ge=1)
+    checkpoint_every: int = Field(500, ge=1)
     keep_checkpoints: int = Field(3, ge=1)
+
+
+class TrainConfig(StrictModel):
+    """Training the ORCa model (``orca train``): the optimizer loop here, the model and its sampling in the
+    groups. Sizes default to the ``standard`` preset."""
+
+    iterations: int = Field(20000, ge=1)
+    batch_rays: int = Field(2048, ge=8)
+    mask_warmup: int = Field(1000, ge=0, description="iterations of silhouette-only training first")
+    lr: float = Field(5e-3, gt=0)
+    lr_final_ratio: float = Field(0.05, gt=0, le=1, description="exponential decay to lr x ratio at the end")
+    grad_clip: float = Field(1.0, gt=0)
     device: Literal["auto", "cpu", "cuda"] = "auto"
     seed: int = 0
-    scene_radius: float = Field(
-        1.2, gt=0, description="rays are sampled inside this sphere (object in the unit sphere)"
-    )
-    # geometry
-    sdf_encoding: Literal["hashgrid", "frequency"] = "hashgrid"
-    sdf_hidden: int = Field(64, ge=8)
-    sdf_layers: int = Field(2, ge=1)
-    sdf_init_radius: float = Field(0.7, gt=0)
-    grid_levels: int = Field(12, ge=1)
-    grid_log2_table: int = Field(16, ge=8, le=24)
-    grid_max_resolution: int = Field(1024, ge=16)
-    texture_levels: int = Field(
-        12, ge=0, description="levels of the diffuse head's own hash grid (0: none, as the paper)"
-    )
-    texture_log2_table: int = Field(17, ge=8, le=24)
-    texture_max_resolution: int = Field(2048, ge=16)
-    # environment
-    env_encoding: Literal["hashgrid", "ipe", "direction"] = Field(
-        "hashgrid", description="'direction': the 2D environment map ablation (radiance from direction only)"
-    )
-    env_hidden: int = Field(64, ge=8)
-    env_layers: int = Field(2, ge=1)
-    env_grid_log2_table: int = Field(17, ge=8, le=24)
-    env_view_freqs: int = Field(
-        2, ge=0, le=8, description="frequencies of the view direction in the environment's radiance (0: none)"
-    )
-    env_contract_radius: float = Field(
-        3.0, gt=0, description="the environment's contraction is the identity inside this radius (object radii)"
-    )
-    env_density_bias: float = Field(
-        -3.0, description="added to the environment field's density before softplus: how empty it starts"
-    )
-    # rendering
-    n_coarse: int = Field(48, ge=4)
-    n_fine: int = Field(32, ge=0)
-    upsample_steps: int = Field(4, ge=1, description="rounds of coarse-to-fine search for the surface")
-    band_samples: int = Field(
-        32, ge=0, description="rendered samples in a band around the surface; 0: render every coarse and fine sample"
-    )
-    env_samples: int = Field(48, ge=4, description="coarse samples along each virtual cone (log-spaced)")
-    env_fine: int = Field(32, ge=0, description="more samples from the coarse pass's weights (0: one pass)")
-    env_fine_render: int = Field(
-        128, ge=0, description="env_fine when a trained model renders (evaluate, export, render): one fixed set of "
-        "samples per view, where training draws new ones every step; too few step through thin props"
-    )
-    env_depth_quantile: float = Field(
-        0.3, gt=0, lt=1, description="an environment ray's depth (export, evaluate, render): where its accumulated "
-        "weight reaches this share of the total (0.5: the median); lower reads the first surface that takes a good "
-        "part of it, where a prop left semi-transparent sits (docs/method.md)"
-    )
-    env_near: float = Field(0.05, gt=0, description="first environment sample past a cone's start (object radii)")
-    env_far: float = Field(
-        100.0, gt=0, description="last environment sample (object radii; the contraction keeps it finite)"
-    )
-    cone_samples: int = Field(2, ge=1, description="top-weight primary samples that cast virtual cones")
-    cone_method: Literal["closed_form", "bounding_rays", "naive"] = "closed_form"
-    ior: float = Field(1.5, gt=1, description="index of refraction of the glossy coating (Fresnel)")
-    beta_init: float = Field(0.05, gt=0)
-    beta_final: float = Field(0.005, gt=0, description="β is capped by a schedule from beta_init to this")
-    beta_anneal: float = Field(0.5, ge=0, le=1, description="fraction of training at which the cap reaches beta_final")
-    sdf_levels_start: int = Field(4, ge=1, description="coarse-to-fine: SDF hash-grid levels active at the start")
-    sdf_levels_full: float = Field(
-        0.3, ge=0, le=1, description="fraction of training after which all levels are active"
-    )
+    sdf: SDFConfig = Field(default_factory=SDFConfig)
+    environment: EnvironmentConfig = Field(default_factory=EnvironmentConfig)
+    render: RenderConfig = Field(default_factory=RenderConfig)
+    sampler: SamplerConfig = Field(default_factory=SamplerConfig)
     losses: LossConfig = Field(default_factory=LossConfig)
+    logging: LoggingConfig = Field(default_factory=LoggingConfig)
 
-    @model_validator(mode="after")
-    def _environment_range(self) -> TrainConfig:
-        if self.env_far <= self.env_near:
-            raise ValueError(f"env_far ({self.env_far}) must exceed env_near ({self.env_near})")
-        return self
+    @model_validator(mode="before")
+    @classmethod
+    def _moved_keys(cls, values: Any) -> Any:
+        # model files and checkpoints of earlier versions hold the flat keys (load_config warns about them in
+        # what a user writes; these are read silently)
+        return move_keys("train", values)[0] if isinstance(values, dict) else values
 
 
 class MeshConfig(StrictModel):
@@ -431,37 +488,108 @@ class PipelineConfig(StrictModel):
     export: ExportConfig = Field(default_factory=ExportConfig)
 
 
-PRESETS: dict[str, dict[str, Any]] = {
-    # CPU, the demo capture, tests: small images, small networks.
-    "fast": {
-        "poses": {"max_image_size": 1024},
-        "train": {
-            "iterations": 3000, "batch_rays": 512, "mask_warmup": 300, "checkpoint_every": 250,
-            "preview_every": 500, "grid_levels": 8, "grid_log2_table": 17, "grid_max_resolution": 128,
-            "texture_levels": 8, "texture_log2_table": 17, "texture_max_resolution": 512,
-            "env_grid_log2_table": 17, "n_coarse": 24, "n_fine": 8, "upsample_steps": 2, "band_samples": 16,
-            "env_samples": 24, "env_fine": 24, "env_fine_render": 96, "background_rays": 768,
-            "cone_samples": 1,
-        },
-        "mesh": {"resolution": 128},
-        "export": {
-            "view_size": 48, "panorama_width": 128, "video_frames": 16, "video_width": 64, "video_height": 48,
-            "object_views": 4, "object_downscale": 4,
-        },
-    },
-    # A GPU and a real capture.
-    "standard": {},
-    # The paper's network sizes and sample counts.
-    "paper": {
-        "train": {
-            "sdf_encoding": "frequency", "sdf_hidden": 256, "sdf_layers": 8, "env_encoding": "ipe", "band_samples": 0,
-            "texture_levels": 0, "losses": {"smoothness": 0.0},
-            "env_hidden": 256, "env_layers": 8, "n_coarse": 64, "n_fine": 128, "env_samples": 64, "env_fine": 128,
-            "cone_samples": 4, "cone_method": "bounding_rays", "iterations": 200000, "batch_rays": 1024,
-            "background_rays": 0,  # the paper learns the environment from the reflections alone
-        },
-    },
-}
+# The train section's flat keys of earlier versions -> their place in it now.
+MOVED: dict[str, dict[str, str]] = {"train": {
+    "object_fraction": "sampler.object_fraction",
+    "background_rays": "sampler.background_rays",
+    "background_near": "sampler.background_near",
+    "depth_rays": "sampler.depth_rays",
+    "depth_object_margin_px": "sampler.depth_object_margin_px",
+    "checkpoint_every": "logging.checkpoint_every",
+    "preview_every": "logging.preview_every",
+    "preview_downscale": "logging.preview_downscale",
+    "log_every": "logging.log_every",
+    "keep_checkpoints": "logging.keep_checkpoints",
+    "sdf_encoding": "sdf.encoding",
+    "sdf_hidden": "sdf.hidden",
+    "sdf_layers": "sdf.layers",
+    "sdf_init_radius": "sdf.init_radius",
+    "grid_levels": "sdf.hash_grid.levels",
+    "grid_log2_table": "sdf.hash_grid.log2_table_size",
+    "grid_max_resolution": "sdf.hash_grid.max_resolution",
+    "texture_levels": "sdf.texture_grid.levels",
+    "texture_log2_table": "sdf.texture_grid.log2_table_size",
+    "texture_max_resolution": "sdf.texture_grid.max_resolution",
+    "sdf_levels_start": "sdf.levels_start",
+    "sdf_levels_full": "sdf.levels_full",
+    "beta_init": "sdf.beta_init",
+    "beta_final": "sdf.beta_final",
+    "beta_anneal": "sdf.beta_anneal",
+    "env_encoding": "environment.encoding",
+    "env_hidden": "environment.hidden",
+    "env_layers": "environment.layers",
+    "env_grid_log2_table": "environment.hash_grid.log2_table_size",
+    "env_view_freqs": "environment.dir_freqs",
+    "env_contract_radius": "environment.contract_radius",
+    "env_density_bias": "environment.density_bias",
+    "scene_radius": "render.object_radius",
+    "n_coarse": "render.n_coarse",
+    "n_fine": "render.n_fine",
+    "upsample_steps": "render.upsample_steps",
+    "band_samples": "render.band_samples",
+    "cone_samples": "render.cone_samples",
+    "cone_method": "render.cone_method",
+    "env_samples": "render.env_samples",
+    "env_fine": "render.env_fine",
+    "env_fine_render": "render.env_fine_render",
+    "env_depth_quantile": "render.depth_quantile",
+    "env_near": "render.env_near",
+    "env_far": "render.env_far",
+    "env_far_from_points": "render.env_far_from_points",
+    "ior": "render.ior",
+}}
+
+
+def move_keys(section: str, values: dict[str, Any]) -> tuple[dict[str, Any], list[tuple[str, str]]]:
+    """``values`` of ``section`` with each of its :data:`MOVED` keys at its new place (a copy), and the
+    ``(old, new)`` keys moved.
+
+    Raises:
+        ValueError: an old key and its new one are both given, or the new one's group is not a mapping.
+    """
+    moved = MOVED.get(section, {})
+    moves = [(k, moved[k]) for k in values if k in moved]
+    if not moves:
+        return values, []
+    out = copy.deepcopy({k: v for k, v in values.items() if k not in moved})
+    for old, new in moves:
+        *groups, key = new.split(".")
+        node = out
+        for group in groups:
+            node = node.setdefault(group, {})
+            if not isinstance(node, dict):
+                raise ValueError(f"{section}.{old} moved to {section}.{new}, but {section}.{group} is not a mapping")
+        if key in node:
+            raise ValueError(f"{section}.{old} and {section}.{new} are both given (the first is the second's "
+                             "earlier name)")
+        node[key] = copy.deepcopy(values[old])
+    return out, moves
+
+
+def _moved_in_layer(where: str, layer: dict[str, Any]) -> dict[str, Any]:
+    """A layer with the :data:`MOVED` keys at their new places, each move a warning naming the new key."""
+    for section in MOVED:
+        if not isinstance(layer.get(section), dict):
+            continue
+        try:
+            values, moves = move_keys(section, layer[section])
+        except ValueError as e:
+            raise ConfigError(f"{where}: {e}", fix="keep only the new key") from e
+        for old, new in moves:
+            log.warning("%s: %s.%s is deprecated; write %s.%s", where, section, old, section, new)
+        layer = {**layer, section: values}
+    return layer
+
+
+def dotted(values: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested mappings as one level of dotted keys: ``{"sdf": {"hidden": 64}}`` -> ``{"sdf.hidden": 64}``."""
+    out: dict[str, Any] = {}
+    for k, v in values.items():
+        if isinstance(v, dict) and v:
+            out.update(dotted(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
 
 
 def deep_merge(base: dict[str, Any], update: dict[str, Any]) -> dict[str, Any]:
@@ -514,6 +642,10 @@ def _yaml_problem(e: yaml.YAMLError) -> str:
     return f"{problem} at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else problem
 
 
+PRESET_DIR = Path(__file__).parent / "presets"
+PRESETS: dict[str, dict[str, Any]] = {p.stem: _read_yaml(p) for p in sorted(PRESET_DIR.glob("*.yaml"))}
+
+
 Layers = list[tuple[str, dict[str, Any]]]  # (where it came from: a file, "--set key=value"; its values)
 
 
@@ -525,6 +657,7 @@ def load_config(
     """Build and validate the config from a preset, YAML files (missing ``None`` entries skipped), overrides."""
     layers = [(str(f), _read_yaml(Path(f))) for f in files if f is not None]
     layers += [(f"--set {o}", parse_override(o)) for o in overrides]
+    layers = [(where, _moved_in_layer(where, layer)) for where, layer in layers]
     chosen = _preset(preset, layers)
     merged: dict[str, Any] = deep_merge({}, PRESETS[chosen])
     for _, layer in layers:
@@ -589,22 +722,38 @@ def _source(loc: tuple[Any, ...], layers: Layers) -> str | None:
 
 
 def _keys_beside(loc: tuple[Any, ...]) -> dict[str, list[str]]:
-    """The valid keys where ``loc``'s last key was given, each with how to write it. A key outside any section
-    may be one section's (``iteratons`` -> ``train.iterations``): those are candidates there too."""
+    """The valid keys where ``loc``'s last key was given, each with how to write it. A key may belong one
+    level or more further in (``iteratons`` -> ``train.iterations``, ``train.hiden`` -> ``train.sdf.hidden``):
+    those are candidates there too, written in full."""
     model: type[BaseModel] = PipelineConfig
     for part in loc[:-1]:
-        field = model.model_fields.get(part) if isinstance(part, str) else None
-        inner = field.annotation if field is not None else None
-        if not (isinstance(inner, type) and issubclass(inner, BaseModel)):
+        inner = _group(model, part)
+        if inner is None:
             return {}
         model = inner
     keys = {k: [k] for k in model.model_fields}
-    if len(loc) == 1:
-        for section, field in PipelineConfig.model_fields.items():
-            if isinstance(field.annotation, type) and issubclass(field.annotation, BaseModel):
-                for k in field.annotation.model_fields:
-                    keys.setdefault(k, []).append(f"{section}.{k}")
+    for path in _paths(model):
+        if len(path) > 1:
+            keys.setdefault(path[-1], []).append(".".join(map(str, (*loc[:-1], *path))))
     return keys
+
+
+def _group(model: type[BaseModel], key: Any) -> type[BaseModel] | None:
+    """The model of ``model``'s field ``key`` when that field is a group of keys."""
+    field = model.model_fields.get(key) if isinstance(key, str) else None
+    inner = field.annotation if field is not None else None
+    return inner if isinstance(inner, type) and issubclass(inner, BaseModel) else None
+
+
+def _paths(model: type[BaseModel], prefix: tuple[str, ...] = ()) -> list[tuple[str, ...]]:
+    """Every key of ``model``, groups' keys included, as paths."""
+    paths = []
+    for key in model.model_fields:
+        paths.append((*prefix, key))
+        inner = _group(model, key)
+        if inner is not None:
+            paths += _paths(inner, (*prefix, key))
+    return paths
 
 
 def _did_you_mean(key: str, valid: dict[str, list[str]]) -> str:
@@ -646,7 +795,7 @@ def stage_config(
 ) -> PipelineConfig:
     """The config a stage's CLI resolves: the capture's ``capture.yaml`` (when it exists), ``config_file``,
     then ``overrides``, whose bare keys (``iterations=500``) belong to ``section``."""
-    fields = type(getattr(PipelineConfig(), section)).model_fields
+    fields = {*type(getattr(PipelineConfig(), section)).model_fields, *MOVED.get(section, {})}
 
     def qualify(item: str) -> str:
         # "iterations=500" and "losses.background=0.1" belong to the stage's section; "masks.x=1" does not

@@ -25,34 +25,23 @@ def model_spec(cfg: TrainConfig):
     from orca.model import ModelSpec
     from orca.render import RenderSpec
 
-    bound = cfg.scene_radius * 1.05  # the SDF grid must cover the sampled sphere
+    sdf, env, render = cfg.sdf, cfg.environment, cfg.render
     return ModelSpec(
         sdf=SDFFieldSpec(
-            encoding=cfg.sdf_encoding,
-            hash_grid=HashGridSpec(levels=cfg.grid_levels, log2_table_size=cfg.grid_log2_table,
-                                   max_resolution=cfg.grid_max_resolution),
-            hidden=cfg.sdf_hidden, layers=cfg.sdf_layers, init_radius=cfg.sdf_init_radius, bound=bound,
-            texture_grid=HashGridSpec(levels=cfg.texture_levels, log2_table_size=cfg.texture_log2_table,
-                                      max_resolution=cfg.texture_max_resolution) if cfg.texture_levels else None,
+            encoding=sdf.encoding, hash_grid=HashGridSpec(**sdf.hash_grid.model_dump()), hidden=sdf.hidden,
+            layers=sdf.layers, init_radius=sdf.init_radius,
+            texture_grid=HashGridSpec(**sdf.texture_grid.model_dump()) if sdf.texture_grid.levels else None,
+            bound=render.object_radius * 1.05,  # the SDF grid must cover the sampled sphere
         ),
         env=EnvironmentFieldSpec(
-            encoding=cfg.env_encoding,
-            hash_grid=HashGridSpec(levels=12, log2_table_size=cfg.env_grid_log2_table, base_resolution=16,
-                                   max_resolution=1024),
-            hidden=cfg.env_hidden, layers=cfg.env_layers, density_bias=cfg.env_density_bias,
-            dir_freqs=cfg.env_view_freqs, contract_radius=cfg.env_contract_radius,
+            encoding=env.encoding, hash_grid=HashGridSpec(**env.hash_grid.model_dump()), hidden=env.hidden,
+            layers=env.layers, dir_freqs=env.dir_freqs, contract_radius=env.contract_radius,
+            density_bias=env.density_bias,
         ),
-        render=RenderSpec(
-            object_radius=cfg.scene_radius, n_coarse=cfg.n_coarse, n_fine=cfg.n_fine, upsample_steps=cfg.upsample_steps,
-            band_samples=cfg.band_samples,
-            env_samples=cfg.env_samples, env_fine=cfg.env_fine, env_fine_render=cfg.env_fine_render,
-            depth_quantile=cfg.env_depth_quantile,
-            env_near=cfg.env_near, env_far=cfg.env_far, cone_samples=cfg.cone_samples, cone_method=cfg.cone_method,
-            ior=cfg.ior,
-        ),
-        beta_init=cfg.beta_init, beta_final=cfg.beta_final, beta_anneal=cfg.beta_anneal,
-        sdf_levels_start=cfg.sdf_levels_start, sdf_levels_full=cfg.sdf_levels_full,
-        background_near=cfg.background_near,
+        render=RenderSpec(**render.model_dump(exclude={"env_far_from_points"})),
+        beta_init=sdf.beta_init, beta_final=sdf.beta_final, beta_anneal=sdf.beta_anneal,
+        sdf_levels_start=sdf.levels_start, sdf_levels_full=sdf.levels_full,
+        background_near=cfg.sampler.background_near,
     )
 
 

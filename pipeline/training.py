@@ -2,7 +2,7 @@
 
 :func:`train` runs Adam with an exponentially decaying learning rate, logs metrics (``metrics.jsonl`` and
 tensorboard) and previews into the checkpoint folder as it goes, and checkpoints every
-``train.checkpoint_every`` steps, at the end of the call and on Ctrl-C. A rerun goes on from the last
+``train.logging.checkpoint_every`` steps, at the end of the call and on Ctrl-C. A rerun goes on from the last
 checkpoint of the same training identity (see :mod:`pipeline.checkpoints`) and draws the batches an
 uninterrupted run would have.
 """
@@ -58,18 +58,19 @@ class Training:
 
 
 def with_far_from_points(cfg: TrainConfig, data, points_dir: Path | None) -> TrainConfig:
-    """``cfg`` with ``env_far`` at ``env_far_from_points`` times the farthest sparse point a photo saw (when
-    there are sparse points and that factor is on)."""
-    if data.depth is None or not len(data.depth) or cfg.env_far_from_points <= 0:
+    """``cfg`` with ``render.env_far`` at ``render.env_far_from_points`` times the farthest sparse point a photo
+    saw (when there are sparse points and that factor is on)."""
+    render = cfg.render
+    if data.depth is None or not len(data.depth) or render.env_far_from_points <= 0:
         return cfg
-    far = far_bound(data.depth.distance.numpy(), cfg.env_far_from_points)
-    if far <= cfg.env_near:
-        raise InputError(f"the sparse points are all within {far:.3g} of the photos, less than train.env_near "
-                         f"({cfg.env_near})", points_dir, "check the poses stage's model, or set "
-                         "train.env_far_from_points=0")
-    log.info("environment samples reach %.2f (%.2f x the farthest point a photo saw; train.env_far was %g)",
-             far, cfg.env_far_from_points, cfg.env_far)
-    return cfg.model_copy(update={"env_far": round(far, 4)})
+    far = far_bound(data.depth.distance.numpy(), render.env_far_from_points)
+    if far <= render.env_near:
+        raise InputError(f"the sparse points are all within {far:.3g} of the photos, less than "
+                         f"train.render.env_near ({render.env_near})", points_dir, "check the poses stage's model, "
+                         "or set train.render.env_far_from_points=0")
+    log.info("environment samples reach %.2f (%.2f x the farthest point a photo saw; train.render.env_far was %g)",
+             far, render.env_far_from_points, render.env_far)
+    return cfg.model_copy(update={"render": render.model_copy(update={"env_far": round(far, 4)})})
 
 
 def train(data, model, cfg: TrainConfig, ckpt_dir: Path, *, restart: bool = False,
@@ -119,7 +120,8 @@ def train(data, model, cfg: TrainConfig, ckpt_dir: Path, *, restart: bool = Fals
     # off-object rays draw from their own stream: the object's batches do not depend on background_rays
     background_generator = torch.Generator().manual_seed(cfg.seed * 1_000_003 + step + 7_919)
     depth_generator = torch.Generator().manual_seed(cfg.seed * 1_000_003 + step + 104_729)
-    use_depth = cfg.depth_rays > 0 and cfg.losses.sparse_depth > 0 and data.depth is not None and len(data.depth)
+    use_depth = (cfg.sampler.depth_rays > 0 and cfg.losses.sparse_depth > 0 and data.depth is not None
+                 and len(data.depth))
 
     writer = SummaryWriter(str(ckpt_dir / TENSORBOARD))
     metrics_path = ckpt_dir / METRICS
@@ -134,10 +136,10 @@ def train(data, model, cfg: TrainConfig, ckpt_dir: Path, *, restart: bool = Fals
             while step < stop_at:
                 phase = "mask" if step < cfg.mask_warmup else "joint"
                 model.apply_schedule(step / cfg.iterations)
-                batch = data.sample(cfg.batch_rays, cfg.object_fraction, generator)
-                background = (data.sample_background(cfg.background_rays, background_generator)
-                              if cfg.background_rays else None)
-                depth = data.sample_depth(cfg.depth_rays, depth_generator) if use_depth else None
+                batch = data.sample(cfg.batch_rays, cfg.sampler.object_fraction, generator)
+                background = (data.sample_background(cfg.sampler.background_rays, background_generator)
+                              if cfg.sampler.background_rays else None)
+                depth = data.sample_depth(cfg.sampler.depth_rays, depth_generator) if use_depth else None
                 total, terms, out = objective(model, batch, weights, phase, background, depth)
                 if not torch.isfinite(total):
                     bad = ", ".join(k for k, v in terms.items() if not torch.isfinite(v)) or "total"
@@ -157,7 +159,7 @@ def train(data, model, cfg: TrainConfig, ckpt_dir: Path, *, restart: bool = Fals
                 optimizer.step()
                 scheduler.step()
                 step += 1
-                if step % cfg.log_every == 0 or step == stop_at:
+                if step % cfg.logging.log_every == 0 or step == stop_at:
                     # clipped highlights are lower bounds, not targets: a PSNR over them is meaningless
                     obj = (batch.mask > 0.5) & batch.valid
                     mse = ((out.rgb - batch.rgb)[obj].square().mean()).item() if obj.any() else float("nan")
@@ -173,15 +175,15 @@ def train(data, model, cfg: TrainConfig, ckpt_dir: Path, *, restart: bool = Fals
                             writer.add_scalar(k, v, step)
                     bar.update(task, completed=step, description=f"train {phase} loss {total.item():.4f} "
                                f"PSNR {psnr:.1f}")
-                if step % cfg.checkpoint_every == 0 or step == stop_at:
-                    save_checkpoint(ckpt_dir, step, model, optimizer, scheduler, cfg, cfg.keep_checkpoints,
+                if step % cfg.logging.checkpoint_every == 0 or step == stop_at:
+                    save_checkpoint(ckpt_dir, step, model, optimizer, scheduler, cfg, cfg.logging.keep_checkpoints,
                                     seconds_before + time.time() - t0, identity)
-                if step % cfg.preview_every == 0 or step == cfg.iterations:
-                    grid = preview_grid(model, data.images[0], data.K[0], data.c2w[0], cfg.preview_downscale)
+                if step % cfg.logging.preview_every == 0 or step == cfg.iterations:
+                    grid = preview_grid(model, data.images[0], data.K[0], data.c2w[0], cfg.logging.preview_downscale)
                     write_png(previews / f"step_{step:07d}.png", grid)
                     writer.add_image("preview", grid, step, dataformats="HWC")
     except KeyboardInterrupt:
-        save_checkpoint(ckpt_dir, step, model, optimizer, scheduler, cfg, cfg.keep_checkpoints,
+        save_checkpoint(ckpt_dir, step, model, optimizer, scheduler, cfg, cfg.logging.keep_checkpoints,
                         seconds_before + time.time() - t0, identity)
         log.warning("interrupted at step %d; checkpoint saved in %s; rerun to resume", step, ckpt_dir)
         raise

@@ -768,7 +768,7 @@ def test_config_errors_name_the_source_and_the_closest_key(tmp_path):
     lines = str(e.value).splitlines()
     assert lines[0] == "invalid configuration:" and lines[-1].startswith("Fix: ") and len(lines) == 5
     assert f"  {f}: decode.downscal: unknown key; did you mean 'downscale'?" in lines
-    assert f"  {f}: train: env_far (2.0) must exceed env_near (5.0)" in lines
+    assert f"  {f}: train.render: env_far (2.0) must exceed env_near (5.0)" in lines
     assert any(line.startswith("  --set poses.matcher=vocabulary: poses.matcher: input should be") for line in lines)
     with pytest.raises(ConfigError, match=r"--set iteratoins=5: iteratoins: unknown key; did you mean "
                                           r"'train.iterations'\?"):

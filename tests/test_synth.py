@@ -156,7 +156,7 @@ def test_layout(sphere_capture: Path):
         ["ground_truth", "capture.yaml"] + [f"{n}.dng" for n in names] + [f"{n}.jpg" for n in names])
     from pipeline.config import load_config
 
-    assert load_config(sphere_capture / "capture.yaml").train.ior == SCENES["sphere"].object.int_ior
+    assert load_config(sphere_capture / "capture.yaml").train.render.ior == SCENES["sphere"].object.int_ior
     assert not [p for p in sphere_capture.parent.iterdir() if p.name.startswith(".")]
     mask = read_image(gt / "masks" / f"{names[0]}.png")
     assert mask.shape == (SPHERE_OPTIONS.height, SPHERE_OPTIONS.width) and set(np.unique(mask)) <= {0, 255}

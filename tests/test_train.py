@@ -121,6 +121,32 @@ def test_checkpoints_of_another_config_or_other_data_are_set_aside_not_resumed(t
     assert _steps(ckpts) == [1]
 
 
+def test_a_checkpoints_identity_compares_the_config_but_its_resume_neutral_keys():
+    """Also across versions: an identity of the flat train keys (and without the neutral ones) resumes under
+    the same values."""
+    from pipeline.checkpoints import identity_changes
+    from pipeline.config import MOVED, dotted
+
+    cfg = load_config(preset="fast").train
+    current = {"config": cfg.model_dump(mode="json"), "data": "d"}
+    old_name = {new: old for old, new in MOVED["train"].items()}
+    flat = {old_name.get(k, k): v for k, v in dotted(cfg.model_dump(mode="json")).items()
+            if not k.startswith(("losses.", "environment.hash_grid.levels", "environment.hash_grid.max_res"))}
+    neutral = {"iterations", "checkpoint_every", "preview_every", "preview_downscale", "log_every",
+               "keep_checkpoints", "device", "env_fine_render", "env_depth_quantile"}
+    earlier = {"config": {**{k: v for k, v in flat.items() if k not in neutral},
+                          "losses": cfg.losses.model_dump(mode="json")}, "data": "d"}
+    assert identity_changes(earlier, current) == []
+    for change, why in (("train.logging.log_every=7", []), ("train.render.depth_quantile=0.4", []),
+                        ("train.iterations=9", []),
+                        ("train.sdf.hidden=32", ["train.sdf.hidden changed"]),
+                        ("train.losses.eikonal=0.2", ["train.losses.eikonal changed"])):
+        now = {"config": load_config(preset="fast", overrides=[change]).train.model_dump(mode="json"), "data": "d"}
+        assert identity_changes(earlier, now) == why, change
+        assert identity_changes(current, now) == why, change
+    assert identity_changes(current, {**current, "data": "e"}) == ["the images, masks or cameras changed"]
+
+
 def test_damaged_checkpoint_names_the_file(tmp_path):
     bad = tmp_path / "step_0000002.pt"
     bad.write_bytes(b"not a checkpoint")
@@ -222,7 +248,7 @@ def test_the_poses_stages_points_give_sparse_depth(sfm_sphere_capture, sfm_spher
     assert result is not None and 0 < result.final_losses["sparse_depth"] <= 1
     assert json.loads((out / "train_report.json").read_text())["sparse_depth_pixels"] == len(depth)
     # the environment's samples reach just past the farthest point, and the saved model renders with that bound
-    far = json.loads((out / "config.json").read_text())["env_far"]
+    far = json.loads((out / "config.json").read_text())["render"]["env_far"]
     assert far == pytest.approx(1.25 * np.quantile(depth.distance.numpy(), 0.999), rel=1e-3)
-    assert far < 0.5 * load_config(preset="fast").train.env_far
+    assert far < 0.5 * load_config(preset="fast").train.render.env_far
     assert load_model(out).spec.render.env_far == far

@@ -72,7 +72,7 @@ def held_out_losses(model, capture, decode, cfg) -> dict[str, float]:
 
     gt = capture / "ground_truth"
     data, _ = load_image_set(decode, gt / "cameras.json", gt / "masks")
-    batch = data.sample(4096, cfg.object_fraction, torch.Generator().manual_seed(123))
+    batch = data.sample(4096, cfg.sampler.object_fraction, torch.Generator().manual_seed(123))
     _, terms, _ = objective(model, batch, loss_weights(cfg), "joint")
     return {k: float(v) for k, v in terms.items()}
 

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from ..config import dotted
 from ..evaluation import metric_rows
 from ..layout import (
     CONTACT_SHEET,
@@ -221,6 +222,7 @@ def section_masks(reader: Reader, folder: Path) -> tuple[str, Data]:
 def section_train(reader: Reader, folder: Path) -> tuple[str, Data]:
     report = reader.json(folder / "train_report.json")
     config = reader.json(folder / "config.json", required=False)
+    config = dotted(config) if isinstance(config, dict) else None  # the train config's groups as sdf.hidden, ...
     data: Data = {"losses": [], "curves": None, "last": None, "bad": 0, "metrics": folder / "metrics.jsonl",
                   "metrics_state": "ok", "preview": None,
                   "config": sorted(config.items()) if isinstance(config, dict) else [],
@@ -236,7 +238,7 @@ def section_train(reader: Reader, folder: Path) -> tuple[str, Data]:
             ("final beta (VolSDF)", report.get("beta")),
         ]
         if isinstance(config, dict):
-            rows += [(k, config.get(k, ...)) for k in ("batch_rays", "mask_warmup", "lr", "sdf_encoding")]
+            rows += [(k, config.get(k, ...)) for k in ("batch_rays", "mask_warmup", "lr", "sdf.encoding")]
         data["rows"] = rows
         data["losses"] = sorted((report.get("final_losses") or {}).items())
         summary = f"{report.get('iterations')} iterations, {duration(report.get('training_seconds'))}"

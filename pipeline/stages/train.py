@@ -83,7 +83,7 @@ def run_train(
     remove_stale_temporary_files(ckpt_dir)  # a checkpoint cut short by SIGKILL
     device = resolve_device(cfg.device)
     torch.manual_seed(cfg.seed)
-    data, names = load_image_set(decode_dir, cameras_path, masks_dir, points_dir, cfg.depth_object_margin_px)
+    data, names = load_image_set(decode_dir, cameras_path, masks_dir, points_dir, cfg.sampler.depth_object_margin_px)
     n_img, height, width = data.shape
     log.info("train: %d images %dx%d, %d object pixels, device %s, %d iterations", n_img, width, height,
              int(data.masks.sum()), device, cfg.iterations)

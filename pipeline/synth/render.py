@@ -526,7 +526,8 @@ def render_capture(scene: str | SceneSpec, out_dir: str | Path, options: SynthOp
         # What a person who knows the material would write: the coat's index of refraction (Fresnel).
         (tmp / CAPTURE_YAML).write_text(
             f"# Settings for this capture (see pipeline/config.py); written by orca synth.\n"
-            f"train:\n  ior: {spec.object.int_ior}  # the object's coat (plastic, glaze)\n", encoding="utf-8")
+            f"train:\n  render:\n    ior: {spec.object.int_ior}  # the object's coat (plastic, glaze)\n",
+            encoding="utf-8")
         write_json(tmp / LAYOUT["scene"], _scene_json(
             resolved, options, photos, residuals, factor, gain, env_views, mi.__version__))
         timing = {"views": len(views), "seconds_per_view": float(np.mean(view_seconds)),
