@@ -11,10 +11,11 @@ import pytest
 
 # A few steps of a very small model: what is tested is the bookkeeping, not the quality.
 TINY_TRAIN = [
-    "train.iterations=6", "train.batch_rays=64", "train.mask_warmup=2", "train.checkpoint_every=2",
-    "train.preview_every=6", "train.preview_downscale=4", "train.log_every=1", "train.n_coarse=8",
-    "train.n_fine=4", "train.env_samples=6", "train.grid_levels=4", "train.grid_log2_table=10",
-    "train.env_grid_log2_table=10", "train.sdf_hidden=16", "train.env_hidden=16", "train.device=cpu",
+    "train.iterations=6", "train.batch_rays=64", "train.mask_warmup=2", "train.logging.checkpoint_every=2",
+    "train.logging.preview_every=6", "train.logging.preview_downscale=4", "train.logging.log_every=1",
+    "train.render.n_coarse=8", "train.render.n_fine=4", "train.render.env_samples=6", "train.sdf.hash_grid.levels=4",
+    "train.sdf.hash_grid.log2_table_size=10", "train.environment.hash_grid.log2_table_size=10", "train.sdf.hidden=16",
+    "train.environment.hidden=16", "train.device=cpu",
 ]
 
 # ---------------------------------------------------------------- data loss: --out, superseded checkpoints
@@ -99,7 +100,7 @@ def test_every_superseded_checkpoint_set_is_kept(tiny_capture, tiny_decode, tmp_
     gt = tiny_capture / "ground_truth"
     out = tmp_path / "train"
     for hidden in (16, 24, 32):
-        cfg = load_config(preset="fast", overrides=[*TINY_TRAIN, f"train.sdf_hidden={hidden}"]).train
+        cfg = load_config(preset="fast", overrides=[*TINY_TRAIN, f"train.sdf.hidden={hidden}"]).train
         run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, cfg, max_steps=1)
     kept = sorted((tmp_path / "train.checkpoints.superseded").iterdir())
     assert len(kept) == 2 and all(list(k.glob("step_*.pt")) for k in kept)
@@ -118,7 +119,7 @@ def test_shorter_iterations_go_on_from_an_earlier_checkpoint(tiny_capture, tiny_
 
     def train(iterations, **kw):
         cfg = load_config(preset="fast", overrides=[*TINY_TRAIN, f"train.iterations={iterations}",
-                                                    "train.checkpoint_every=2"]).train
+                                                    "train.logging.checkpoint_every=2"]).train
         return run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, cfg, **kw)
 
     assert train(6, max_steps=4) is None  # checkpoints at steps 2 and 4
@@ -318,7 +319,7 @@ def test_sigterm_checkpoints_train_with_points_and_a_rerun_resumes(tiny_capture,
     gt = tiny_capture / "ground_truth"
     points = _colmap_model(gt / "cameras.json", tmp_path / "sparse")
     out = tmp_path / "train"
-    overrides = [a for o in [*TINY_TRAIN, "train.iterations=100000", "train.checkpoint_every=100000"]
+    overrides = [a for o in [*TINY_TRAIN, "train.iterations=100000", "train.logging.checkpoint_every=100000"]
                  for a in ("--set", o)]
     proc = subprocess.Popen([sys.executable, "-m", "pipeline.cli", "train", "--decode", str(tiny_decode),
                              "--ground-truth", str(gt), "--points", str(points), "--out", str(out),
@@ -364,14 +365,14 @@ def test_a_snakemake_run_sigtermed_during_train_resumes_on_rerun(tiny_capture, t
     results = tmp_path / "results" / "tiny"
 
     def snakemake(*overrides: str) -> subprocess.Popen:
-        sets = "[" + ",".join(f'"{o}"' for o in [*DAG_OVERRIDES, "train.log_every=1", *overrides]) + "]"
+        sets = "[" + ",".join(f'"{o}"' for o in [*DAG_OVERRIDES, "train.logging.log_every=1", *overrides]) + "]"
         cmd = [sys.executable, "-m", "snakemake", "results/tiny/train", "--snakefile", str(ROOT / "Snakefile"),
                "--directory", str(tmp_path), "--cores", "2", "--config", 'captures=["tiny"]', f"set={sets}"]
         return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                 start_new_session=True)
 
     metrics, train_log = results / "train.checkpoints" / "metrics.jsonl", results / "logs" / "train.log"
-    first = snakemake("train.iterations=100000", "train.checkpoint_every=100000")
+    first = snakemake("train.iterations=100000", "train.logging.checkpoint_every=100000")
     try:
         output = _signal_when(first, lambda: metrics.is_file() and len(metrics.read_text().splitlines()) >= 2,
                               "training steps", group=True)
@@ -762,7 +763,7 @@ def test_config_errors_name_the_source_and_the_closest_key(tmp_path):
     from pipeline.errors import ConfigError
 
     f = tmp_path / "my.yaml"
-    f.write_text("decode:\n  downscal: 2\ntrain:\n  env_near: 5\n  env_far: 2\n")
+    f.write_text("decode:\n  downscal: 2\ntrain:\n  render:\n    env_near: 5\n    env_far: 2\n")
     with pytest.raises(ConfigError) as e:
         load_config(f, overrides=["poses.matcher=vocabulary"])
     lines = str(e.value).splitlines()

@@ -222,10 +222,11 @@ def test_select_views_evenly_spaced():
 # ----------------------------------------------------------------------------------------- end to end
 
 TINY = [
-    "train.iterations=4", "train.batch_rays=64", "train.mask_warmup=2", "train.checkpoint_every=4",
-    "train.preview_every=4", "train.preview_downscale=4", "train.log_every=2", "train.n_coarse=8",
-    "train.n_fine=4", "train.env_samples=6", "train.grid_levels=4", "train.grid_log2_table=10",
-    "train.env_grid_log2_table=10", "train.sdf_hidden=16", "train.env_hidden=16", "train.device=cpu",
+    "train.iterations=4", "train.batch_rays=64", "train.mask_warmup=2", "train.logging.checkpoint_every=4",
+    "train.logging.preview_every=4", "train.logging.preview_downscale=4", "train.logging.log_every=2",
+    "train.render.n_coarse=8", "train.render.n_fine=4", "train.render.env_samples=6", "train.sdf.hash_grid.levels=4",
+    "train.sdf.hash_grid.log2_table_size=10", "train.environment.hash_grid.log2_table_size=10", "train.sdf.hidden=16",
+    "train.environment.hidden=16", "train.device=cpu",
 ]
 
 

@@ -158,7 +158,7 @@ def test_config_layers_and_overrides(tmp_path):
         ("decode:\n  downscale: 0\n", "downscale"),
         ("preset: turbo\n", "unknown preset"),
         ("- a\n- b\n", "mapping"),
-        ("train:\n  env_near: 5\n  env_far: 2\n", "env_far"),
+        ("train:\n  render:\n    env_near: 5\n    env_far: 2\n", "env_far"),
     ],
 )
 def test_config_rejects_bad_files_naming_the_problem(tmp_path, text, match):
@@ -170,7 +170,7 @@ def test_config_rejects_bad_files_naming_the_problem(tmp_path, text, match):
 
 def test_config_error_from_an_override_names_the_override(tmp_path):
     f = tmp_path / "capture.yaml"
-    f.write_text("train:\n  ior: 1.9\n")
+    f.write_text("train:\n  render:\n    ior: 1.9\n")
     with pytest.raises(ConfigError, match=r"--set train.losses.clipped_excess=2"):
         load_config(f, overrides=["train.losses.clipped_excess=2"])
 
@@ -202,7 +202,7 @@ def test_a_stages_config_digest_follows_its_own_values_only(tmp_path, monkeypatc
     assert stage_config_digest("train", "standard") != base
     capture_yaml = tmp_path / "capture.yaml"
     assert stage_config_digest("train", "fast", capture_yaml=capture_yaml) == base, "no capture.yaml: defaults"
-    capture_yaml.write_text("train:\n  ior: 1.9\n")
+    capture_yaml.write_text("train:\n  render:\n    ior: 1.9\n")
     assert stage_config_digest("train", "fast", capture_yaml=capture_yaml) != base
     # a default changed by an upgrade (no file, no command line) changes it too
     monkeypatch.setitem(PRESETS["fast"]["train"], "lr", 1e-3)

@@ -90,5 +90,6 @@ def test_the_renderer_takes_the_trained_configs_render_settings(setup):
     from pipeline.rendering import load_renderer
 
     model = load_renderer(setup[0], "cpu")
-    assert model.spec.render.deterministic and model.spec.render.env_fine == 2  # train.env_fine_render (tiny_model)
-    assert model.spec.render.depth_quantile == 0.4  # train.env_depth_quantile (tiny_model)
+    # train.render.env_fine_render and depth_quantile (tiny_model)
+    assert model.spec.render.deterministic and model.spec.render.env_fine == 2
+    assert model.spec.render.depth_quantile == 0.4

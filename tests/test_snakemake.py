@@ -14,10 +14,11 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 TINY_TRAIN = [
-    "train.iterations=4", "train.batch_rays=64", "train.mask_warmup=2", "train.n_coarse=8", "train.n_fine=4",
-    "train.upsample_steps=1", "train.band_samples=4", "train.env_samples=6", "train.grid_levels=4",
-    "train.grid_log2_table=10", "train.texture_levels=2", "train.texture_log2_table=10",
-    "train.env_grid_log2_table=10", "train.sdf_hidden=16", "train.env_hidden=16",
+    "train.iterations=4", "train.batch_rays=64", "train.mask_warmup=2", "train.render.n_coarse=8",
+    "train.render.n_fine=4", "train.render.upsample_steps=1", "train.render.band_samples=4",
+    "train.render.env_samples=6", "train.sdf.hash_grid.levels=4", "train.sdf.hash_grid.log2_table_size=10",
+    "train.sdf.texture_grid.levels=2", "train.sdf.texture_grid.log2_table_size=10",
+    "train.environment.hash_grid.log2_table_size=10", "train.sdf.hidden=16", "train.environment.hidden=16",
     # mesh and export as small as they go: the DAG and the files, not the pictures, are tested here
     "mesh.resolution=32", "export.view_size=8", "export.panorama_width=16", "export.video_frames=2",
     "export.video_width=16", "export.video_height=12", "export.object_views=1", "export.object_downscale=4",

@@ -18,10 +18,11 @@ from pipeline.training import TrainingDiverged
 
 # A few steps of a very small model: what is tested is the bookkeeping, not the quality.
 TINY = [
-    "train.iterations=6", "train.batch_rays=64", "train.mask_warmup=2", "train.checkpoint_every=2",
-    "train.preview_every=6", "train.preview_downscale=4", "train.log_every=1", "train.n_coarse=8",
-    "train.n_fine=4", "train.env_samples=6", "train.grid_levels=4", "train.grid_log2_table=10",
-    "train.env_grid_log2_table=10", "train.sdf_hidden=16", "train.env_hidden=16", "train.device=cpu",
+    "train.iterations=6", "train.batch_rays=64", "train.mask_warmup=2", "train.logging.checkpoint_every=2",
+    "train.logging.preview_every=6", "train.logging.preview_downscale=4", "train.logging.log_every=1",
+    "train.render.n_coarse=8", "train.render.n_fine=4", "train.render.env_samples=6", "train.sdf.hash_grid.levels=4",
+    "train.sdf.hash_grid.log2_table_size=10", "train.environment.hash_grid.log2_table_size=10", "train.sdf.hidden=16",
+    "train.environment.hidden=16", "train.device=cpu",
 ]
 
 
@@ -59,11 +60,11 @@ def test_a_terminated_orca_train_checkpoints_and_resumes(tiny_capture, tiny_deco
 
     gt = tiny_capture / "ground_truth"
     out = tmp_path / "train"
-    overrides = [a for o in TINY if o.split("=")[0] not in ("train.iterations", "train.checkpoint_every")
+    overrides = [a for o in TINY if o.split("=")[0] not in ("train.iterations", "train.logging.checkpoint_every")
                  for a in ("--set", o)]
     cmd = [sys.executable, "-m", "pipeline.cli", "train", "--decode", str(tiny_decode), "--ground-truth", str(gt),
            "--out", str(out), "--preset", "fast", *overrides, "--set", "train.iterations=100000",
-           "--set", "train.checkpoint_every=100000"]
+           "--set", "train.logging.checkpoint_every=100000"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     metrics = checkpoint_dir_for(out) / "metrics.jsonl"
     deadline = time.time() + 120
@@ -93,12 +94,12 @@ def test_checkpoints_of_another_config_or_other_data_are_set_aside_not_resumed(t
     ckpts, aside = checkpoint_dir_for(out), tmp_path / "train.checkpoints.superseded"
     run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, _cfg(), max_steps=2)
     # what only changes the bookkeeping (or the render-time settings) resumes
-    run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, _cfg("train.log_every=2",
-              "train.env_depth_quantile=0.4"), max_steps=2)
+    run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, _cfg("train.logging.log_every=2",
+              "train.render.depth_quantile=0.4"), max_steps=2)
     assert _steps(ckpts) == [1, 2, 4] and not aside.exists()
     # another network, or another loss weight: the old run is kept aside (every earlier set too), the new one
     # starts from zero
-    for change, last_aside in (("train.sdf_hidden=32", ["step_0000004.pt"]),
+    for change, last_aside in (("train.sdf.hidden=32", ["step_0000004.pt"]),
                                ("train.losses.eikonal=0.2", ["step_0000004.pt", "step_0000002.pt"])):
         run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, _cfg(change), max_steps=2)
         assert _steps(ckpts) == [1, 2], change
@@ -193,7 +194,8 @@ def test_missing_masks_are_named(tiny_capture, tiny_decode, tmp_path):
 def test_training_lowers_the_loss_on_the_tiny_capture(tiny_capture, tiny_decode, tmp_path):
     gt = tiny_capture / "ground_truth"
     out = tmp_path / "train"
-    cfg = _cfg("train.iterations=40", "train.mask_warmup=20", "train.checkpoint_every=40", "train.preview_every=40")
+    cfg = _cfg("train.iterations=40", "train.mask_warmup=20", "train.logging.checkpoint_every=40",
+               "train.logging.preview_every=40")
     run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, cfg)
     rows = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
     mask = np.array([r["mask"] for r in rows])
@@ -244,7 +246,7 @@ def test_the_poses_stages_points_give_sparse_depth(sfm_sphere_capture, sfm_spher
 
     out = tmp_path / "train"
     result = run_train(sfm_sphere_decode, poses / "cameras.json", masks, out,
-                       _cfg("train.depth_rays=32"), points_dir=poses / "sparse")
+                       _cfg("train.sampler.depth_rays=32"), points_dir=poses / "sparse")
     assert result is not None and 0 < result.final_losses["sparse_depth"] <= 1
     assert json.loads((out / "train_report.json").read_text())["sparse_depth_pixels"] == len(depth)
     # the environment's samples reach just past the farthest point, and the saved model renders with that bound

@@ -24,9 +24,9 @@ from pipeline.training_data import load_image_set
 pytest.importorskip("mitsuba")
 
 QUICK = [
-    "train.iterations=300", "train.batch_rays=128", "train.mask_warmup=200", "train.checkpoint_every=300",
-    "train.preview_every=300", "train.log_every=10", "train.lr=0.01", "train.device=cpu",
-    "train.background_rays=128",
+    "train.iterations=300", "train.batch_rays=128", "train.mask_warmup=200", "train.logging.checkpoint_every=300",
+    "train.logging.preview_every=300", "train.logging.log_every=10", "train.lr=0.01", "train.device=cpu",
+    "train.sampler.background_rays=128",
 ]
 
 

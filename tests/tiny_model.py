@@ -1,6 +1,6 @@
 """A train folder holding a tiny, untrained model (seconds to build, no capture needed) and a few cameras
 around it: enough for the file formats and geometry of the stages after ``train`` (render, mesh, export,
-evaluate). The untrained SDF is the initial sphere of radius ``train.sdf_init_radius`` (0.7) plus a small
+evaluate). The untrained SDF is the initial sphere of radius ``train.sdf.init_radius`` (0.7) plus a small
 network correction; the environment field is a random but fixed function."""
 
 from __future__ import annotations
@@ -10,10 +10,11 @@ from pathlib import Path
 import numpy as np
 
 TINY_MODEL = [
-    "train.grid_levels=4", "train.grid_log2_table=10", "train.texture_levels=2", "train.texture_log2_table=10",
-    "train.env_grid_log2_table=10", "train.sdf_hidden=16", "train.env_hidden=16", "train.n_coarse=8",
-    "train.n_fine=4", "train.upsample_steps=1", "train.band_samples=4", "train.env_samples=6", "train.env_fine=0",
-    "train.env_fine_render=2", "train.env_depth_quantile=0.4", "train.device=cpu",
+    "train.sdf.hash_grid.levels=4", "train.sdf.hash_grid.log2_table_size=10", "train.sdf.texture_grid.levels=2",
+    "train.sdf.texture_grid.log2_table_size=10", "train.environment.hash_grid.log2_table_size=10",
+    "train.sdf.hidden=16", "train.environment.hidden=16", "train.render.n_coarse=8", "train.render.n_fine=4",
+    "train.render.upsample_steps=1", "train.render.band_samples=4", "train.render.env_samples=6",
+    "train.render.env_fine=0", "train.render.env_fine_render=2", "train.render.depth_quantile=0.4", "train.device=cpu",
 ]
 
 
