@@ -15,8 +15,6 @@ from .config import TrainConfig
 from .errors import InputError, OrcaError
 from .layout import MANIFEST, MODEL
 
-FINAL_WEIGHTS = MODEL
-
 
 def model_spec(cfg: TrainConfig):
     """The ``orca.model.ModelSpec`` a train config describes."""
@@ -74,7 +72,7 @@ def load_model(train_dir: Path, device: str = "cpu"):
     """The trained model of a train folder (safe loading), in eval mode."""
     from orca.model import OrcaModel
 
-    path = Path(train_dir) / FINAL_WEIGHTS
+    path = Path(train_dir) / MODEL
     if not path.is_file():
         raise InputError("no trained model here", path, "run `orca train` first")
     state = load_checkpoint(path)

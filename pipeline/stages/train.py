@@ -28,14 +28,14 @@ from ..artifacts import (
 from ..checkpoints import METRICS, PREVIEWS, TENSORBOARD
 from ..config import TrainConfig, add_config_arguments, config_from_arguments
 from ..errors import InputError
-from ..model_io import FINAL_WEIGHTS, model_spec, resolve_device, save_model
+from ..layout import CAMERAS_JSON, CAPTURE_YAML, CHECKPOINTS_SUFFIX, DECODE_JSON, MASK_FILES, MODEL
+from ..model_io import model_spec, resolve_device, save_model
 from ..provenance import FORCE_HELP, common_capture
 from ..training import train, with_far_from_points
 from ..training_data import load_image_set
 
 log = logging.getLogger("orca.train")
 
-CHECKPOINT_SUFFIX = ".checkpoints"
 
 
 @dataclass(frozen=True)
@@ -47,7 +47,7 @@ class TrainResult:
 
 
 def checkpoint_dir_for(out_dir: Path) -> Path:
-    return out_dir.with_name(out_dir.name + CHECKPOINT_SUFFIX)
+    return out_dir.with_name(out_dir.name + CHECKPOINTS_SUFFIX)
 
 
 def run_train(
@@ -97,7 +97,7 @@ def run_train(
         return None
 
     with atomic_dir(out_dir, "train", sources) as tmp:
-        save_model(tmp / FINAL_WEIGHTS, model, cfg, run.step)
+        save_model(tmp / MODEL, model, cfg, run.step)
         (tmp / "config.json").write_text(cfg.model_dump_json(indent=2) + "\n", encoding="utf-8")
         shutil.copy2(ckpt_dir / METRICS, tmp / "metrics.jsonl")
         if (ckpt_dir / PREVIEWS).is_dir():
@@ -109,7 +109,7 @@ def run_train(
             "final_losses": run.final_losses, "beta": model.beta.item(),
             "sparse_depth_pixels": len(data.depth) if data.depth is not None else 0,
         })
-        write_manifest(tmp, stage="train", inputs={"cameras": cameras_path, "decode": decode_dir / "decode.json"},
+        write_manifest(tmp, stage="train", inputs={"cameras": cameras_path, "decode": decode_dir / DECODE_JSON},
                        config=cfg.model_dump(), started=started, capture=capture)
     log.info("train: wrote %s", out_dir)
     return TrainResult(out_dir, run.step, time.time() - started, run.final_losses)
@@ -160,13 +160,13 @@ def register(subparsers: Any) -> None:
 
 def main(args: argparse.Namespace) -> TrainResult | None:
     if args.ground_truth is not None:
-        cameras = args.cameras or args.ground_truth / "cameras.json"
-        masks = args.masks or args.ground_truth / "masks"
+        cameras = args.cameras or args.ground_truth / CAMERAS_JSON
+        masks = args.masks or args.ground_truth / MASK_FILES
     else:
         cameras, masks = args.cameras, args.masks
     if cameras is None or masks is None:
         raise InputError("train needs cameras and masks: pass --cameras and --masks, or --ground-truth")
-    capture_yaml = args.capture / "capture.yaml" if args.capture is not None else None
+    capture_yaml = args.capture / CAPTURE_YAML if args.capture is not None else None
     config = config_from_arguments(args, "train", capture_yaml)
     cfg = config.train if args.device is None else config.train.model_copy(update={"device": args.device})
     out = args.out if args.out is not None else Path(args.decode).parent / "train"
