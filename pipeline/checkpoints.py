@@ -25,16 +25,14 @@ from pydantic import ValidationError
 from .artifacts import atomic_path
 from .config import TrainConfig, dotted
 from .errors import InputError
+from .layout import LIVE_TENSORBOARD, METRICS, PREVIEWS
 
 log = logging.getLogger("orca.train")
 
 CHECKPOINT_FORMAT = 1
-METRICS = "metrics.jsonl"
-PREVIEWS = "previews"
-TENSORBOARD = "tb"
 
 # what a checkpoint folder holds: checkpoints (and atomic_path's temporary files), the live logs and previews
-_CHECKPOINT_ENTRY = re.compile(rf"\.?step_\d+\.pt.*|{TENSORBOARD}|{PREVIEWS}|{re.escape(METRICS)}")
+_CHECKPOINT_ENTRY = re.compile(rf"\.?step_\d+\.pt.*|{LIVE_TENSORBOARD}|{PREVIEWS}|{re.escape(METRICS)}")
 
 # Train config keys (dotted) that do not change what the iterations compute: checkpoints made under other
 # values resume. (`iterations` may change too: a finished run extended, or a time-boxed one cut short, goes on

@@ -52,11 +52,36 @@ MASKS_REPORT = "masks_report.json"
 OVERLAYS = "overlays"
 CONTACT_SHEET = "contact_sheet.jpg"
 
-# train, mesh, export, evaluate, report
+# train (and its live copies in train.checkpoints/: metrics, previews, tensorboard events as "tb")
 MODEL = "model.pt"
 CHECKPOINTS_SUFFIX = ".checkpoints"  # train.checkpoints/ beside the train folder
+TRAIN_CONFIG = "config.json"
+TRAIN_REPORT = "train_report.json"
+METRICS = "metrics.jsonl"
+PREVIEWS = "previews"
+TENSORBOARD = "tensorboard"
+LIVE_TENSORBOARD = "tb"
+
+# mesh
 MESH_PLY = "mesh.ply"
+MESH_COLMAP_PLY = "mesh_colmap.ply"
+MESH_REPORT = "mesh_report.json"
+MESH_FIGURE = "mesh.png"
+
+# export (and render: views.json beside the rendered images)
+EXPORT_JSON = "export.json"
+PANORAMA = "panorama"
+ENVIRONMENT = "environment"  # also ground_truth/environment/
+OBJECT_VIEWS = "object"
+VIDEOS = "videos"
+ORBIT_VIDEO, FLYTHROUGH_VIDEO = "orbit.mp4", "flythrough.mp4"
+POINT_CLOUD, POINT_CLOUD_COLMAP = "environment_points.ply", "environment_points_colmap.ply"
+OVERVIEW = "overview.png"
+VIEWS_JSON = "views.json"
+
+# evaluate, report
 EVALUATE_JSON = "evaluate.json"
+OBJECT_GRID, ENVIRONMENT_GRID = "object_grid.png", "environment_grid.png"
 REPORT_HTML = "report.html"
 
 

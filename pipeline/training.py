@@ -19,9 +19,6 @@ from pathlib import Path
 import numpy as np
 
 from .checkpoints import (
-    METRICS,
-    PREVIEWS,
-    TENSORBOARD,
     checkpoints,
     discard_checkpoints,
     identity_changes,
@@ -35,6 +32,7 @@ from .checkpoints import (
 from .config import TrainConfig
 from .errors import InputError, OrcaError
 from .imageio import to_srgb8, write_png
+from .layout import LIVE_TENSORBOARD, METRICS, PREVIEWS
 from .log import progress
 from .model_io import loss_weights
 from .sparse_depth import far_bound
@@ -123,7 +121,7 @@ def train(data, model, cfg: TrainConfig, ckpt_dir: Path, *, restart: bool = Fals
     use_depth = (cfg.sampler.depth_rays > 0 and cfg.losses.sparse_depth > 0 and data.depth is not None
                  and len(data.depth))
 
-    writer = SummaryWriter(str(ckpt_dir / TENSORBOARD))
+    writer = SummaryWriter(str(ckpt_dir / LIVE_TENSORBOARD))
     metrics_path = ckpt_dir / METRICS
     previews = ckpt_dir / PREVIEWS
     stop_at = cfg.iterations if max_steps is None else min(cfg.iterations, step + max_steps)

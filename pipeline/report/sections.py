@@ -21,18 +21,37 @@ from ..layout import (
     CONTACT_SHEET,
     DECODE,
     DECODE_JSON,
+    ENVIRONMENT,
+    ENVIRONMENT_GRID,
     EVALUATE,
     EVALUATE_JSON,
     EXPORT,
+    EXPORT_JSON,
+    FLYTHROUGH_VIDEO,
     MANIFEST,
     MASKS,
     MASKS_REPORT,
     MESH,
+    MESH_COLMAP_PLY,
+    MESH_FIGURE,
     MESH_PLY,
+    MESH_REPORT,
+    METRICS,
+    OBJECT_GRID,
+    OBJECT_VIEWS,
+    ORBIT_VIDEO,
+    PANORAMA,
+    POINT_CLOUD,
+    POINT_CLOUD_COLMAP,
     POSES,
     POSES_FIGURE,
     POSES_REPORT,
+    PREVIEWS,
+    TENSORBOARD,
     TRAIN,
+    TRAIN_CONFIG,
+    TRAIN_REPORT,
+    VIDEOS,
 )
 from .curves import read_metrics, training_curves
 from .page import duration, text
@@ -220,13 +239,13 @@ def section_masks(reader: Reader, folder: Path) -> tuple[str, Data]:
 
 
 def section_train(reader: Reader, folder: Path) -> tuple[str, Data]:
-    report = reader.json(folder / "train_report.json")
-    config = reader.json(folder / "config.json", required=False)
+    report = reader.json(folder / TRAIN_REPORT)
+    config = reader.json(folder / TRAIN_CONFIG, required=False)
     config = dotted(config) if isinstance(config, dict) else None  # the train config's groups as sdf.hidden, ...
-    data: Data = {"losses": [], "curves": None, "last": None, "bad": 0, "metrics": folder / "metrics.jsonl",
+    data: Data = {"losses": [], "curves": None, "last": None, "bad": 0, "metrics": folder / METRICS,
                   "metrics_state": "ok", "preview": None,
                   "config": sorted(config.items()) if isinstance(config, dict) else [],
-                  "tensorboard": folder / "tensorboard"}
+                  "tensorboard": folder / TENSORBOARD}
     if isinstance(report, dict):
         rows = [
             ("iterations", report.get("iterations")),
@@ -243,7 +262,7 @@ def section_train(reader: Reader, folder: Path) -> tuple[str, Data]:
         data["losses"] = sorted((report.get("final_losses") or {}).items())
         summary = f"{report.get('iterations')} iterations, {duration(report.get('training_seconds'))}"
     else:
-        data["unreadable"] = folder / "train_report.json"
+        data["unreadable"] = folder / TRAIN_REPORT
         summary = "train_report.json missing"
     metrics = data["metrics"]
     if metrics.is_file():
@@ -267,20 +286,20 @@ def section_train(reader: Reader, folder: Path) -> tuple[str, Data]:
     else:
         reader.problems.append(f"{reader.rel(metrics)} is missing")
         data["metrics_state"] = "missing"
-    previews = sorted((folder / "previews").glob("step_*.png")) if (folder / "previews").is_dir() else []
+    previews = sorted((folder / PREVIEWS).glob("step_*.png")) if (folder / PREVIEWS).is_dir() else []
     if previews:
         data["preview"] = reader.picture(previews[-1], f"{previews[-1].stem} (first training image)")
     return summary, data
 
 
 def section_mesh(reader: Reader, folder: Path) -> tuple[str, Data]:
-    report = reader.json(folder / "mesh_report.json")
+    report = reader.json(folder / MESH_REPORT)
     data: Data = {
-        "picture": reader.picture(folder / "mesh.png", "three views of the mesh (shaded, diffuse vertex colours)"),
+        "picture": reader.picture(folder / MESH_FIGURE, "three views of the mesh (shaded, diffuse vertex colours)"),
         "mesh": reader.link(folder / MESH_PLY),
-        "colmap": reader.link(folder / "mesh_colmap.ply") if (folder / "mesh_colmap.ply").is_file() else None}
+        "colmap": reader.link(folder / MESH_COLMAP_PLY) if (folder / MESH_COLMAP_PLY).is_file() else None}
     if not isinstance(report, dict):
-        return "mesh_report.json missing", {**data, "unreadable": folder / "mesh_report.json"}
+        return "mesh_report.json missing", {**data, "unreadable": folder / MESH_REPORT}
     tri = report.get("triangles")
     data["rows"] = [
         ("vertices", report.get("vertices")), ("triangles", tri),
@@ -307,10 +326,10 @@ def section_mesh(reader: Reader, folder: Path) -> tuple[str, Data]:
 
 EXPORT_FILES = (  # (file, what it is, named even when missing): the COLMAP-frame cloud only when the cameras
     # had that frame
-    (Path("videos") / "orbit.mp4", "orbit of the object (video)", True),
-    (Path("videos") / "flythrough.mp4", "flythrough of the environment from inside the object (video)", True),
-    (Path("environment_points.ply"), "the environment as a coloured point cloud", True),
-    (Path("environment_points_colmap.ply"), "the same in COLMAP's frame", False),
+    (Path(VIDEOS) / ORBIT_VIDEO, "orbit of the object (video)", True),
+    (Path(VIDEOS) / FLYTHROUGH_VIDEO, "flythrough of the environment from inside the object (video)", True),
+    (Path(POINT_CLOUD), "the environment as a coloured point cloud", True),
+    (Path(POINT_CLOUD_COLMAP), "the same in COLMAP's frame", False),
 )
 OBJECT_PARTS = ("rgb", "diffuse", "specular", "normal")
 
@@ -325,11 +344,11 @@ def _views(reader: Reader, folder: Path, names: Sequence[str]) -> Data | None:
 
 
 def section_export(reader: Reader, folder: Path) -> tuple[str, Data]:
-    report = reader.json(folder / "export.json")
+    report = reader.json(folder / EXPORT_JSON)
     data: Data = {}
     if not isinstance(report, dict):
         report = {}
-        data["unreadable"] = folder / "export.json"
+        data["unreadable"] = folder / EXPORT_JSON
     else:
         pano = report.get("panorama") or {}
         scale = report.get("depth_png_scale") or {}
@@ -357,15 +376,15 @@ def section_export(reader: Reader, folder: Path) -> tuple[str, Data]:
     data["files"] = [(what, reader.link(folder / path)) for path, what, always in EXPORT_FILES
                      if always or (folder / path).exists()]
     data["panorama"] = [
-        reader.picture(folder / "panorama" / "panorama_rgb.png", "panorama (environment field, sRGB)"),
-        reader.picture(folder / "panorama" / "panorama_depth.png", "panorama depth (distance along each ray, turbo)")]
-    env = folder / "environment"
+        reader.picture(folder / PANORAMA / f"{PANORAMA}_rgb.png", "panorama (environment field, sRGB)"),
+        reader.picture(folder / PANORAMA / f"{PANORAMA}_depth.png", "panorama depth (distance along each ray, turbo)")]
+    env = folder / ENVIRONMENT
     names = list(report.get("environment_views") or [])
     if not names and env.is_dir():
         names = sorted(p.name[: -len("_rgb.png")] for p in env.glob("*_rgb.png"))
     data["cube"] = _views(reader, env, [n for n in names if n.startswith("cube_")])
     data["other"] = _views(reader, env, [n for n in names if not n.startswith("cube_")])
-    data["objects"] = [(name, [reader.picture(folder / "object" / f"{name}_{part}.png", required=False)
+    data["objects"] = [(name, [reader.picture(folder / OBJECT_VIEWS / f"{name}_{part}.png", required=False)
                                for part in OBJECT_PARTS]) for name in report.get("object_views") or []]
     summary = f"{len(names)} environment views, panorama" + (
         f", {report['point_cloud'].get('points')} points" if isinstance(report.get("point_cloud"), dict) else "")
@@ -402,12 +421,12 @@ def section_evaluate(reader: Reader, folder: Path) -> tuple[str, Data]:
     ], "poses": None, "mesh": None}
     summary = []
     data["object"], means = _evaluated_views(reader, folder, results.get("object"), "Object views",
-                                             "object_grid.png")
+                                             OBJECT_GRID)
     for key, template in (("normal_mae_deg", "normals {:.2f}°"), ("psnr_srgb_specular", "specular {:.1f} dB (sRGB)")):
         if isinstance(means.get(key), int | float):
             summary.append(template.format(means[key]))
     data["environment"], means = _evaluated_views(reader, folder, results.get("environment"), "Environment views",
-                                                  "environment_grid.png")
+                                                  ENVIRONMENT_GRID)
     if isinstance(means.get("depth_absrel"), int | float):
         summary.append(f"environment depth AbsRel {means['depth_absrel']:.3g}")
     poses = results.get("poses")

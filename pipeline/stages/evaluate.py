@@ -42,7 +42,18 @@ from ..evaluation import (
 )
 from ..figures import environment_grid, object_grid
 from ..ground_truth import GroundTruth, resolve_ground_truth
-from ..layout import CAMERAS_JSON, EVALUATE_JSON, MANIFEST, MESH, MESH_PLY, MODEL, POSES, TRAIN
+from ..layout import (
+    CAMERAS_JSON,
+    ENVIRONMENT_GRID,
+    EVALUATE_JSON,
+    MANIFEST,
+    MESH,
+    MESH_PLY,
+    MODEL,
+    OBJECT_GRID,
+    POSES,
+    TRAIN,
+)
 from ..log import console, progress
 from ..metrics import mesh_errors
 from ..props import PROP_MARGIN
@@ -96,7 +107,8 @@ def evaluate_views(model, gt: GroundTruth, align: Similarity, views: int | Seque
             bar.advance(task)
     seconds = time.time() - started
     if rows:
-        (environment_grid if environment else object_grid)(out / f"{part}_grid.png", rows)
+        grid, name = (environment_grid, ENVIRONMENT_GRID) if environment else (object_grid, OBJECT_GRID)
+        grid(out / name, rows)
     compared = {"prop_margin": PROP_MARGIN} if environment else {
         "region": next(iter(per_view.values()))["region"] if per_view else None}
     return {"views": names, "downscale": downscale, **compared, "per_view": per_view,

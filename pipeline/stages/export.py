@@ -47,7 +47,21 @@ from ..cameras import Camera, CameraSet, save_cameras, select_views
 from ..config import ExportConfig, add_config_arguments, config_from_arguments
 from ..errors import InputError
 from ..imageio import to_srgb8, write_png
-from ..layout import CAMERAS_JSON, MODEL
+from ..layout import (
+    CAMERAS_JSON,
+    ENVIRONMENT,
+    EXPORT_JSON,
+    FLYTHROUGH_VIDEO,
+    MODEL,
+    OBJECT_VIEWS,
+    ORBIT_VIDEO,
+    OVERVIEW,
+    PANORAMA,
+    POINT_CLOUD,
+    POINT_CLOUD_COLMAP,
+    VIDEOS,
+    VIEWS_JSON,
+)
 from ..log import progress
 from ..media import depth_scale, normal_png, overview, write_environment_view, write_point_cloud, write_video
 from ..model_io import training_cameras
@@ -73,7 +87,6 @@ from ..rendering import (
 
 log = logging.getLogger("orca.export")
 
-EXPORT_JSON = "export.json"
 
 
 # ------------------------------------------------------------------------------------------------ stage
@@ -119,34 +132,34 @@ def run_export(train_dir: Path, out_dir: Path, cfg: ExportConfig | None = None, 
         task = bar.add_task("panorama", total=pano_w * pano_h)
         pano = render_panorama(model, pano_w, pano_h, centre, frame, bar=bar, task=task)
         scale = depth_scale([pano["depth"]])
-        (tmp / "panorama").mkdir()
-        write_environment_view(tmp / "panorama", "panorama", pano, scale)
+        (tmp / PANORAMA).mkdir()
+        write_environment_view(tmp / PANORAMA, PANORAMA, pano, scale)
         points, colors = panorama_points(pano["rgb"], pano["depth"], centre, frame, cfg.point_cloud_max_depth)
-        write_point_cloud(tmp / "environment_points.ply", points, colors)
+        write_point_cloud(tmp / POINT_CLOUD, points, colors)
         if to_colmap is not None:
-            write_point_cloud(tmp / "environment_points_colmap.ply", points, colors, np.asarray(to_colmap))
+            write_point_cloud(tmp / POINT_CLOUD_COLMAP, points, colors, np.asarray(to_colmap))
         timing["panorama"] = time.time() - t
 
         t = time.time()
-        (tmp / "environment").mkdir()
+        (tmp / ENVIRONMENT).mkdir()
         env_views: dict[str, dict[str, np.ndarray]] = {}
         task = bar.add_task("environment views", total=len(env_cams))
         for cam in env_cams:
             env_views[cam.name] = render_environment_view(model, cam)
-            write_environment_view(tmp / "environment", cam.name, env_views[cam.name], scale)
+            write_environment_view(tmp / ENVIRONMENT, cam.name, env_views[cam.name], scale)
             bar.advance(task)
-        save_cameras(tmp / "environment" / CAMERAS_JSON, CameraSet(cameras=[
+        save_cameras(tmp / ENVIRONMENT / CAMERAS_JSON, CameraSet(cameras=[
             c.model_copy(update={"image": f"{c.name}_rgb.exr"}) for c in env_cams]))
         timing["environment_views"] = time.time() - t
 
-        (tmp / "videos").mkdir()
+        (tmp / VIDEOS).mkdir()
         t = time.time()
         task = bar.add_task("flythrough video", total=len(fly))
         frames = []
         for cam in fly:
             frames.append(to_srgb8(render_environment_view(model, cam)["rgb"]))
             bar.advance(task)
-        write_video(tmp / "videos" / "flythrough.mp4", frames, cfg.video_fps)
+        write_video(tmp / VIDEOS / FLYTHROUGH_VIDEO, frames, cfg.video_fps)
         timing["flythrough_video"] = time.time() - t
 
         t = time.time()
@@ -156,28 +169,28 @@ def run_export(train_dir: Path, out_dir: Path, cfg: ExportConfig | None = None, 
             rgb = render_composite_view(model, cam) if cfg.background else render_object_view(model, cam)["rgb"]
             frames.append(to_srgb8(rgb))
             bar.advance(task)
-        write_video(tmp / "videos" / "orbit.mp4", frames, cfg.video_fps)
+        write_video(tmp / VIDEOS / ORBIT_VIDEO, frames, cfg.video_fps)
         timing["orbit_video"] = time.time() - t
 
         t = time.time()
         objects: dict[str, dict[str, np.ndarray]] = {}
         if object_cams:
-            (tmp / "object").mkdir()
+            (tmp / OBJECT_VIEWS).mkdir()
             task = bar.add_task("object renders", total=len(object_cams))
             k = cfg.object_downscale
             for cam in object_cams:
                 view = render_object_view(model, cam, k)
                 objects[cam.name] = view
-                write_views(tmp / "object", cam.name, view)
+                write_views(tmp / OBJECT_VIEWS, cam.name, view)
                 for part in ("diffuse", "specular"):
-                    write_png(tmp / "object" / f"{cam.name}_{part}.png", to_srgb8(view[part]))
-                write_png(tmp / "object" / f"{cam.name}_normal.png", normal_png(view["normal"]))
+                    write_png(tmp / OBJECT_VIEWS / f"{cam.name}_{part}.png", to_srgb8(view[part]))
+                write_png(tmp / OBJECT_VIEWS / f"{cam.name}_normal.png", normal_png(view["normal"]))
                 bar.advance(task)
-            save_cameras(tmp / "object" / "views.json", CameraSet(frame=train_cams.frame, cameras=[
+            save_cameras(tmp / OBJECT_VIEWS / VIEWS_JSON, CameraSet(frame=train_cams.frame, cameras=[
                 rendered_camera(c, k, f"{c.name}_rgb.exr") for c in object_cams]))
         timing["object_renders"] = time.time() - t
 
-        overview(tmp / "overview.png", pano, env_views, objects, scale)
+        overview(tmp / OVERVIEW, pano, env_views, objects, scale)
         report: dict[str, Any] = {
             "train": str(train_dir), "cameras": cams_from,
             "frame": {"up": up.tolist(), "forward": frame[:, 0].tolist(), "left": frame[:, 1].tolist(),

@@ -27,7 +27,7 @@ from ..artifacts import atomic_dir, check_output_dir, write_json, write_manifest
 from ..config import MeshConfig, add_config_arguments, config_from_arguments, with_values
 from ..errors import InputError
 from ..imageio import linear_to_srgb
-from ..layout import MESH_PLY, MODEL
+from ..layout import MESH_COLMAP_PLY, MESH_FIGURE, MESH_PLY, MESH_REPORT, MODEL
 from ..meshing import (
     diffuse_colors,
     drop_small_components,
@@ -43,9 +43,6 @@ from ..rendering import load_renderer
 
 log = logging.getLogger("orca.mesh")
 
-MESH_COLMAP_PLY = "mesh_colmap.ply"
-MESH_REPORT = "mesh_report.json"
-MESH_PNG = "mesh.png"
 
 
 def run_mesh(train_dir: Path, out_dir: Path, cfg: MeshConfig | None = None, *, cameras: Path | None = None,
@@ -93,7 +90,7 @@ def run_mesh(train_dir: Path, out_dir: Path, cfg: MeshConfig | None = None, *, c
             colmap.transform(np.asarray(to_colmap, np.float64))
             o3d.io.write_triangle_mesh(str(tmp / MESH_COLMAP_PLY), colmap, write_ascii=False)
             report["colmap_mesh"] = MESH_COLMAP_PLY
-        mesh_picture(mesh, tmp / MESH_PNG)
+        mesh_picture(mesh, tmp / MESH_FIGURE)
         report["seconds_total"] = round(time.time() - started, 2)
         write_json(tmp / MESH_REPORT, report)
         write_manifest(tmp, stage="mesh", inputs={"model": weights}, config=cfg.model_dump(), started=started,

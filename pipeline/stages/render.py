@@ -22,7 +22,7 @@ from typing import Any
 from ..artifacts import atomic_dir, write_manifest
 from ..cameras import CameraSet, load_cameras, save_cameras
 from ..errors import InputError
-from ..layout import MODEL
+from ..layout import MODEL, VIEWS_JSON
 from ..log import progress
 from ..provenance import common_capture
 from ..rendering import (
@@ -58,7 +58,7 @@ def run_render(
         for cam in cameras.cameras:
             write_views(tmp, cam.name, render(model, cam, downscale))
             bar.advance(task)
-        save_cameras(tmp / "views.json", CameraSet(frame=cameras.frame, cameras=[
+        save_cameras(tmp / VIEWS_JSON, CameraSet(frame=cameras.frame, cameras=[
             rendered_camera(c, downscale, f"{c.name}_rgb.exr") for c in cameras.cameras]))
         write_manifest(tmp, stage="render", inputs={"model": Path(train_dir) / MODEL, "cameras": cameras_path},
                        config={"environment": environment, "downscale": downscale}, started=started,

@@ -25,10 +25,22 @@ from ..artifacts import (
     write_json,
     write_manifest,
 )
-from ..checkpoints import METRICS, PREVIEWS, TENSORBOARD
 from ..config import TrainConfig, add_config_arguments, config_from_arguments
 from ..errors import InputError
-from ..layout import CAMERAS_JSON, CAPTURE_YAML, CHECKPOINTS_SUFFIX, DECODE_JSON, MASK_FILES, MODEL
+from ..layout import (
+    CAMERAS_JSON,
+    CAPTURE_YAML,
+    CHECKPOINTS_SUFFIX,
+    DECODE_JSON,
+    LIVE_TENSORBOARD,
+    MASK_FILES,
+    METRICS,
+    MODEL,
+    PREVIEWS,
+    TENSORBOARD,
+    TRAIN_CONFIG,
+    TRAIN_REPORT,
+)
 from ..model_io import model_spec, resolve_device, save_model
 from ..provenance import FORCE_HELP, common_capture
 from ..training import train, with_far_from_points
@@ -98,12 +110,12 @@ def run_train(
 
     with atomic_dir(out_dir, "train", sources) as tmp:
         save_model(tmp / MODEL, model, cfg, run.step)
-        (tmp / "config.json").write_text(cfg.model_dump_json(indent=2) + "\n", encoding="utf-8")
-        shutil.copy2(ckpt_dir / METRICS, tmp / "metrics.jsonl")
+        (tmp / TRAIN_CONFIG).write_text(cfg.model_dump_json(indent=2) + "\n", encoding="utf-8")
+        shutil.copy2(ckpt_dir / METRICS, tmp / METRICS)
         if (ckpt_dir / PREVIEWS).is_dir():
-            shutil.copytree(ckpt_dir / PREVIEWS, tmp / "previews")
-        shutil.copytree(ckpt_dir / TENSORBOARD, tmp / "tensorboard")
-        write_json(tmp / "train_report.json", {
+            shutil.copytree(ckpt_dir / PREVIEWS, tmp / PREVIEWS)
+        shutil.copytree(ckpt_dir / LIVE_TENSORBOARD, tmp / TENSORBOARD)
+        write_json(tmp / TRAIN_REPORT, {
             "iterations": run.step, "images": names, "size": [width, height], "device": str(device),
             "seconds_this_run": round(run.seconds, 2), "training_seconds": round(run.seconds_total, 2),
             "final_losses": run.final_losses, "beta": model.beta.item(),
