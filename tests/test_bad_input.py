@@ -8,15 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-
-# A few steps of a very small model: what is tested is the bookkeeping, not the quality.
-TINY_TRAIN = [
-    "train.iterations=6", "train.batch_rays=64", "train.mask_warmup=2", "train.logging.checkpoint_every=2",
-    "train.logging.preview_every=6", "train.logging.preview_downscale=4", "train.logging.log_every=1",
-    "train.render.n_coarse=8", "train.render.n_fine=4", "train.render.env_samples=6", "train.sdf.hash_grid.levels=4",
-    "train.sdf.hash_grid.log2_table_size=10", "train.environment.hash_grid.log2_table_size=10", "train.sdf.hidden=16",
-    "train.environment.hidden=16", "train.device=cpu",
-]
+from helpers import TINY_DAG, TINY_TRAIN, orbit_cameras, snakemake_command, write_untrained_train_dir
 
 # ---------------------------------------------------------------- data loss: --out, superseded checkpoints
 
@@ -55,8 +47,6 @@ def test_decode_never_replaces_its_capture(tiny_capture, tmp_path, where):
 def test_a_stage_replaces_only_a_folder_it_wrote(tiny_capture, tiny_decode, tmp_path, caplog):
     """Item 1: --out of another stage's folder, of a user's folder, of a file: refused with the folder named;
     a folder the same stage wrote is replaced, an empty one is used."""
-    from tiny_model import orbit_cameras, write_untrained_train_dir
-
     from pipeline.cameras import save_cameras
 
     gt = tiny_capture / "ground_truth"
@@ -351,23 +341,17 @@ def test_a_snakemake_run_sigtermed_during_train_resumes_on_rerun(tiny_capture, t
     import shutil
     import signal
     import subprocess
-    import sys
     import time
-
-    from test_snakemake import ROOT
-    from test_snakemake import TINY_TRAIN as DAG_OVERRIDES
 
     from pipeline.checkpoints import checkpoint_step
 
     capture = Path(shutil.copytree(tiny_capture, tmp_path / "captures" / "tiny"))
-    shutil.copy(capture / "ground_truth" / "cameras.json", capture / "cameras.json")  # as in test_snakemake
+    shutil.copy(capture / "ground_truth" / "cameras.json", capture / "cameras.json")  # as the DAG test does
     shutil.copytree(capture / "ground_truth" / "masks", capture / "masks")
     results = tmp_path / "results" / "tiny"
 
     def snakemake(*overrides: str) -> subprocess.Popen:
-        sets = "[" + ",".join(f'"{o}"' for o in [*DAG_OVERRIDES, "train.logging.log_every=1", *overrides]) + "]"
-        cmd = [sys.executable, "-m", "snakemake", "results/tiny/train", "--snakefile", str(ROOT / "Snakefile"),
-               "--directory", str(tmp_path), "--cores", "2", "--config", 'captures=["tiny"]', f"set={sets}"]
+        cmd = snakemake_command(tmp_path, [*TINY_DAG, "train.logging.log_every=1", *overrides], "results/tiny/train")
         return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                 start_new_session=True)
 
@@ -569,8 +553,6 @@ def test_inputs_of_another_capture_are_refused(tiny_capture, tmp_path, caplog):
     truth printed a 22.9 deg pose error with exit 0. Each manifest records its capture; a mismatch stops the
     stage unless --force, and a moved capture (the same photos) is still recognized."""
     import shutil
-
-    from tiny_model import write_untrained_train_dir
 
     from pipeline.artifacts import write_manifest
     from pipeline.provenance import recorded_capture

@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 import pytest
 import yaml
+from helpers import TESTDATA
 
 from calibration import Board, CalibrateOptions, load_calibration, run_calibration
 from calibration.board import load_board_file
@@ -21,9 +22,9 @@ from calibration.run import calibrate
 from pipeline.cli import main as orca
 from pipeline.errors import InputError
 
-TESTDATA = Path(__file__).resolve().parents[2] / "shared" / "testdata" / "calibration"
+PHOTOS = TESTDATA / "calibration"
 needs_testdata = pytest.mark.skipif(
-    not TESTDATA.is_dir(), reason=f"real calibration photos not found at {TESTDATA} (clone the repo next to shared/)"
+    not PHOTOS.is_dir(), reason=f"real calibration photos not found at {PHOTOS} (clone the repo next to shared/)"
 )
 
 SIZE = (640, 480)
@@ -175,7 +176,7 @@ def test_inverted_board_is_found_automatically_and_not_when_told_otherwise(tmp_p
 @needs_testdata
 def test_real_chessboard_photos_calibrate_under_one_pixel(tmp_path):
     board = Board(kind="chessboard", squares_x=10, squares_y=7, square_size=0.025)  # 9 x 6 inner corners
-    cal = run_calibration(TESTDATA / "chessboard_opencv", tmp_path / "cal", board)
+    cal = run_calibration(PHOTOS / "chessboard_opencv", tmp_path / "cal", board)
     assert cal.rms_reprojection_px < 1.0
     assert cal.images_used >= 12 and (cal.width, cal.height) == (640, 480)
     assert abs(cal.fx / cal.fy - 1) < 0.01  # square pixels
@@ -186,7 +187,7 @@ def test_real_chessboard_photos_calibrate_under_one_pixel(tmp_path):
 def test_real_charuco_frames_through_the_cli_and_loader(tmp_path):
     """caliscope's charuco.toml (4 x 5 squares, 5.4 cm, DICT_4X4_1000, inverted) via `orca calibrate`."""
     out = tmp_path / "captures" / "mug" / "calibration"
-    folder = TESTDATA / "charuco_cam0"
+    folder = PHOTOS / "charuco_cam0"
     assert orca(["calibrate", str(folder), "--out", str(out), "--board-file", str(folder / "charuco.toml")]) == 0
     cal = load_calibration(out)  # the folder, as the poses stage will pass it
     doc = json.loads((out / "calibration.json").read_text())
@@ -201,7 +202,7 @@ def test_real_charuco_frames_through_the_cli_and_loader(tmp_path):
 
 @needs_testdata
 def test_caliscope_board_file_is_read():
-    fields = load_board_file(TESTDATA / "charuco_cam0" / "charuco.toml")
+    fields = load_board_file(PHOTOS / "charuco_cam0" / "charuco.toml")
     board = Board(**fields)
     assert (board.squares_x, board.squares_y, board.dictionary, board.inverted) == (4, 5, "DICT_4X4_1000", True)
     assert board.square_size == pytest.approx(0.054) and board.marker_length == pytest.approx(0.0405)
@@ -227,7 +228,7 @@ def test_board_not_found_names_the_folder_and_the_fixes(tmp_path):
 def test_wrong_dictionary_is_diagnosed(tmp_path):
     photos = tmp_path / "frames"
     photos.mkdir()
-    for p in sorted((TESTDATA / "charuco_cam0").glob("*.jpg"))[:6]:
+    for p in sorted((PHOTOS / "charuco_cam0").glob("*.jpg"))[:6]:
         shutil.copy(p, photos)
     board = Board(squares_x=4, squares_y=5, square_size=0.054, dictionary="DICT_5X5_100", inverted=True)
     with pytest.raises(InputError) as e:

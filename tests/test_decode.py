@@ -11,16 +11,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rawpy
-from test_dng import colourful, psnr
+from helpers import TESTDATA, colourful
 
 from pipeline.config import DecodeConfig
 from pipeline.dng import Exposure, decoded_scale, write_dng
 from pipeline.errors import InputError
 from pipeline.imageio import linear_to_srgb, read_exr, read_image, write_png
+from pipeline.metrics import psnr
 from pipeline.raw import apply_orientation
 from pipeline.stages.decode import register, run_decode
 
-TESTDATA = Path(__file__).resolve().parents[2] / "shared" / "testdata"
 RAW_DIR = TESTDATA / "raw"
 needs_testdata = pytest.mark.skipif(
     not RAW_DIR.is_dir(), reason=f"real-camera test data not found at {RAW_DIR} (clone the repo next to shared/)"

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import rawpy
 import tifffile
+from helpers import colourful
 
 from pipeline.dng import (
     Exposure,
@@ -20,21 +21,6 @@ from pipeline.dng import (
     write_dng,
 )
 from pipeline.metrics import psnr
-
-
-def colourful(h: int = 96, w: int = 128) -> np.ndarray:
-    """Smooth gradients plus soft-edged colour blobs, values in about [0.03, 0.8]."""
-    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
-    yy /= h
-    xx /= w
-    img = np.stack([0.1 + 0.5 * xx, 0.1 + 0.45 * yy, 0.15 + 0.4 * (1 - xx) * (0.3 + yy)], axis=-1)
-    for cy, cx, r, colour in [(0.3, 0.25, 0.12, (0.7, 0.15, 0.05)), (0.65, 0.7, 0.15, (0.05, 0.25, 0.6)),
-                              (0.7, 0.25, 0.1, (0.2, 0.6, 0.1))]:
-        d2 = ((yy - cy) * h) ** 2 + ((xx - cx) * w) ** 2
-        a = 1.0 / (1.0 + np.exp((np.sqrt(d2) - r * w) / 1.5))  # soft edge, ~1.5 px
-        img = img * (1 - a[..., None]) + a[..., None] * np.array(colour)
-    return img.astype(np.float32)
-
 
 EXP = Exposure(shutter_s=1 / 100, iso=100, f_number=4.0)
 WHEN = dt.datetime(2024, 5, 6, 7, 8, 9)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from tiny_model import orbit_cameras, write_untrained_train_dir
+from helpers import orbit_cameras, write_untrained_train_dir
 
 from pipeline.alignment import Similarity, align_cameras
 from pipeline.cameras import CameraSet, save_cameras

@@ -85,7 +85,7 @@ def test_environment_cameras_look_where_named():
 
 def test_orca_export_on_a_tiny_model(tmp_path):
     import open3d as o3d
-    from tiny_model import orbit_cameras, write_untrained_train_dir
+    from helpers import orbit_cameras, write_untrained_train_dir
 
     from pipeline.cameras import CameraSet, load_cameras, save_cameras
     from pipeline.cli import main

@@ -8,7 +8,7 @@ import json
 
 import numpy as np
 import pytest
-from tiny_model import write_untrained_train_dir
+from helpers import write_untrained_train_dir
 
 from pipeline.errors import InputError
 from pipeline.meshing import marching_cubes, mesh_properties, to_open3d
@@ -66,7 +66,7 @@ def test_a_surface_leaving_the_cube_is_closed_by_it_and_an_empty_field_gives_no_
 
 def test_orca_mesh_on_a_tiny_model(tmp_path):
     import open3d as o3d
-    from tiny_model import orbit_cameras
+    from helpers import orbit_cameras
 
     from pipeline.cameras import CameraSet, save_cameras
     from pipeline.cli import main

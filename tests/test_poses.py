@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import TESTDATA
 
 from pipeline.alignment import compare_poses
 from pipeline.artifacts import read_json
@@ -23,7 +24,7 @@ from pipeline.transforms import (
     to_transforms,
 )
 
-FOUNTAIN = Path(__file__).resolve().parents[1] / ".." / "shared" / "testdata" / "sfm" / "fountain-P11"
+FOUNTAIN = TESTDATA / "sfm" / "fountain-P11"
 CONFIG = PosesConfig(num_threads=2)
 
 

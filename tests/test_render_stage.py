@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from tiny_model import orbit_cameras, write_untrained_train_dir
+from helpers import orbit_cameras, write_untrained_train_dir
 
 from pipeline.cameras import CameraSet, load_cameras, save_cameras
 from pipeline.cli import main

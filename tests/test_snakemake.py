@@ -8,40 +8,25 @@ import json
 import os
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-
-TINY_TRAIN = [
-    "train.iterations=4", "train.batch_rays=64", "train.mask_warmup=2", "train.render.n_coarse=8",
-    "train.render.n_fine=4", "train.render.upsample_steps=1", "train.render.band_samples=4",
-    "train.render.env_samples=6", "train.sdf.hash_grid.levels=4", "train.sdf.hash_grid.log2_table_size=10",
-    "train.sdf.texture_grid.levels=2", "train.sdf.texture_grid.log2_table_size=10",
-    "train.environment.hash_grid.log2_table_size=10", "train.sdf.hidden=16", "train.environment.hidden=16",
-    # mesh and export as small as they go: the DAG and the files, not the pictures, are tested here
-    "mesh.resolution=32", "export.view_size=8", "export.panorama_width=16", "export.video_frames=2",
-    "export.video_width=16", "export.video_height=12", "export.object_views=1", "export.object_downscale=4",
-]
+from helpers import TINY_DAG, snakemake_command
 
 
 def snakemake(workdir: Path, *args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
-    overrides = "[" + ",".join(f'"{o}"' for o in TINY_TRAIN) + "]"
-    cmd = [sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / "Snakefile"), "--directory", str(workdir),
-           "--cores", "2", "--config", 'captures=["tiny"]', f"set={overrides}", *args]
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=600, check=False,
-                          env=None if env is None else {**os.environ, **env})
+    return subprocess.run(snakemake_command(workdir, TINY_DAG, *args), capture_output=True, text=True, timeout=600,
+                          check=False, env=None if env is None else {**os.environ, **env})
 
 
 def test_the_dag_runs_decode_train_evaluate_then_nothing(tiny_capture, tmp_path):
     (tmp_path / "captures").mkdir()
     shutil.copytree(tiny_capture, tmp_path / "captures" / "tiny")
     # 4 views of 48x36 pixels are too few and too small for SfM: the capture brings its cameras (as a turntable
-    # would), so the poses rule runs for real on the known-cameras path (SfM runs in tests/test_poses.py).
+    # would), so the poses rule runs for real on the known-cameras path (SfM runs in tests/stages/test_poses.py).
     shutil.copy(tiny_capture / "ground_truth" / "cameras.json", tmp_path / "captures" / "tiny" / "cameras.json")
     # 48x36 pixels are too few for the automatic masks (their cues need texture around the object): the capture
     # brings masks (here the ground truth's) as a user would, so the masks rule runs its user-mask path for real
-    # (the automatic method runs in tests/test_masks.py).
+    # (the automatic method runs in tests/stages/test_masks.py).
     shutil.copytree(tiny_capture / "ground_truth" / "masks", tmp_path / "captures" / "tiny" / "masks")
     first = snakemake(tmp_path)
     assert first.returncode == 0, first.stderr[-3000:]

@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 import torch
+from helpers import TINY_TRAIN
 
 from pipeline.checkpoints import load_checkpoint
 from pipeline.config import load_config
@@ -16,18 +17,9 @@ from pipeline.model_io import load_model
 from pipeline.stages.train import checkpoint_dir_for, run_train
 from pipeline.training import TrainingDiverged
 
-# A few steps of a very small model: what is tested is the bookkeeping, not the quality.
-TINY = [
-    "train.iterations=6", "train.batch_rays=64", "train.mask_warmup=2", "train.logging.checkpoint_every=2",
-    "train.logging.preview_every=6", "train.logging.preview_downscale=4", "train.logging.log_every=1",
-    "train.render.n_coarse=8", "train.render.n_fine=4", "train.render.env_samples=6", "train.sdf.hash_grid.levels=4",
-    "train.sdf.hash_grid.log2_table_size=10", "train.environment.hash_grid.log2_table_size=10", "train.sdf.hidden=16",
-    "train.environment.hidden=16", "train.device=cpu",
-]
-
 
 def _cfg(*extra):
-    return load_config(preset="fast", overrides=[*TINY, *extra]).train
+    return load_config(preset="fast", overrides=[*TINY_TRAIN, *extra]).train
 
 
 def test_interrupted_training_resumes_from_its_checkpoint(tiny_capture, tiny_decode, tmp_path):
@@ -60,7 +52,7 @@ def test_a_terminated_orca_train_checkpoints_and_resumes(tiny_capture, tiny_deco
 
     gt = tiny_capture / "ground_truth"
     out = tmp_path / "train"
-    overrides = [a for o in TINY if o.split("=")[0] not in ("train.iterations", "train.logging.checkpoint_every")
+    overrides = [a for o in TINY_TRAIN if o.split("=")[0] not in ("train.iterations", "train.logging.checkpoint_every")
                  for a in ("--set", o)]
     cmd = [sys.executable, "-m", "pipeline.cli", "train", "--decode", str(tiny_decode), "--ground-truth", str(gt),
            "--out", str(out), "--preset", "fast", *overrides, "--set", "train.iterations=100000",
