@@ -14,6 +14,7 @@ import math
 
 import pytest
 import torch
+from helpers import random_rotation
 
 from orca.cones import VirtualCone, astigmatic_vergences, osculating_sphere_center, virtual_cone
 from orca.geometry_utils import orthonormal_basis
@@ -23,14 +24,6 @@ METHODS = ["closed_form", "bounding_rays"]
 
 
 # ------------------------------------------------------------------------------------------------ helpers
-
-
-def _rotation(seed: int) -> torch.Tensor:
-    """A fixed random rotation (so no test runs in an axis-aligned special position)."""
-    g = torch.Generator().manual_seed(seed)
-    q, rr = torch.linalg.qr(torch.randn(3, 3, generator=g, dtype=F64))
-    q = q * torch.sign(torch.diagonal(rr))
-    return q if torch.det(q) > 0 else -q
 
 
 def _basis(d: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -48,7 +41,7 @@ class Scene:
     """
 
     def __init__(self, kind: str, theta_deg: float, s: float, R: float = 0.7, seed: int = 0):
-        rot = _rotation(seed)
+        rot = torch.from_numpy(random_rotation(seed))  # no test in an axis-aligned special position
         th = math.radians(theta_deg)
         self.kind, self.R, self.s = kind, R, s
         self.p = rot @ torch.tensor([0.2, -0.1, 0.3], dtype=F64)
