@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # Real photos (RAW files, fountain-P11, calibration sets) live beside the repository, not in it.
 TESTDATA = ROOT.parent / "shared" / "testdata"
 
-# ------------------------------------------------------------------------------------------ configurations
+# --------------------------------------------------------------------------------------------- configurations
 
 # A few steps of a very small model: what is tested is the bookkeeping, not the quality.
 TINY_TRAIN = [
@@ -63,7 +63,7 @@ def snakemake_command(workdir: Path, overrides: list[str], *args: str) -> list[s
             str(workdir), "--cores", "2", "--config", 'captures=["tiny"]', f"set={sets}"]
 
 
-# ---------------------------------------------------------------------------------------- scenes and models
+# ------------------------------------------------------------------------------------------ scenes and models
 
 
 def small(spec: SceneSpec) -> SceneSpec:
@@ -114,7 +114,7 @@ def moved_cameras(cams: CameraSet, sim: Similarity) -> CameraSet:
                               for c in cams.cameras])
 
 
-# ---------------------------------------------------------------------------------------- rotations, images
+# ------------------------------------------------------------------------------------------ rotations, images
 
 
 def rotation(axis, deg: float) -> np.ndarray:

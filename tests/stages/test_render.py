@@ -1,6 +1,6 @@
-"""``orca render`` round-trips a camera file: views.json holds the input cameras (as rendered), every image
-has its camera's size, rendering is deterministic, and views.json of a downscaled render renders to the same
-images again."""
+"""The render stage: ``orca render`` round-trips a camera file (views.json holds the input cameras as rendered,
+every image has its camera's size, rendering is deterministic, and views.json of a downscaled render renders
+to the same images again) and refuses a downscale larger than a camera."""
 
 from __future__ import annotations
 
@@ -84,12 +84,3 @@ def test_render_refuses_a_downscale_larger_than_a_camera(setup, tmp_path):
     with pytest.raises(InputError, match="smaller than the downscale"):
         run_render(train, path, tmp_path / "x", downscale=13, device="cpu")
     assert not (tmp_path / "x").exists()
-
-
-def test_the_renderer_takes_the_trained_configs_render_settings(setup):
-    from pipeline.rendering import load_renderer
-
-    model = load_renderer(setup[0], "cpu")
-    # train.render.env_fine_render and depth_quantile (tiny_model)
-    assert model.spec.render.deterministic and model.spec.render.env_fine == 2
-    assert model.spec.render.depth_quantile == 0.4

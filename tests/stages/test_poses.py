@@ -14,15 +14,9 @@ from helpers import TESTDATA
 from pipeline.alignment import compare_poses
 from pipeline.artifacts import read_json
 from pipeline.cameras import CameraSet, load_cameras, save_cameras
-from pipeline.config import ConfigError, PosesConfig, load_config
+from pipeline.config import PosesConfig
 from pipeline.errors import InputError
-from pipeline.sfm import required_registered, sequential_pairs
-from pipeline.transforms import (
-    load_transforms,
-    opengl_from_opencv,
-    save_transforms,
-    to_transforms,
-)
+from pipeline.transforms import load_transforms, save_transforms, to_transforms
 
 FOUNTAIN = TESTDATA / "sfm" / "fountain-P11"
 CONFIG = PosesConfig(num_threads=2)
@@ -61,73 +55,6 @@ def errors_against_truth(cameras: CameraSet, truth: CameraSet) -> dict[str, floa
 def assert_no_output(out: Path) -> None:
     assert not out.exists(), f"{out} was left behind"
     assert not [p for p in out.parent.iterdir() if p.name.startswith(f".{out.name}")], "temporary folder left behind"
-
-
-# ------------------------------------------------------------------------------------------------ units
-
-
-def test_sequential_pairs_wrap_around_the_capture():
-    names = [f"IMG_{i:02d}" for i in range(10)]
-    pairs = set(sequential_pairs(names, overlap=2))
-    assert ("IMG_00", "IMG_01") in pairs and ("IMG_00", "IMG_02") in pairs
-    assert ("IMG_00", "IMG_09") in pairs and ("IMG_01", "IMG_09") in pairs  # the circle closes
-    assert ("IMG_00", "IMG_04") in pairs and ("IMG_00", "IMG_08") in pairs  # 2^k apart: loop closure
-    assert ("IMG_00", "IMG_05") not in pairs
-    assert all(a < b for a, b in pairs)
-    assert len(sequential_pairs(names, overlap=20)) == 45  # more neighbours than photos: every pair once
-
-
-def test_required_registered_uses_count_and_fraction():
-    config = PosesConfig(min_registered=3, min_registered_fraction=0.75)
-    assert required_registered(20, config) == 15
-    assert required_registered(3, config) == 3
-    assert required_registered(2, config) == 2  # never more than there are photos
-
-
-def test_poses_config_is_validated():
-    assert load_config(preset="fast").poses.max_image_size == 1024
-    with pytest.raises(ConfigError, match="matcher"):
-        load_config(overrides=["poses.matcher=vocabulary"])
-    with pytest.raises(ConfigError, match="min_registered_fraction"):
-        load_config(overrides=["poses.min_registered_fraction=1.5"])
-    with pytest.raises(ConfigError, match="unknown_key"):
-        load_config(overrides=["poses.unknown_key=1"])
-
-
-def test_transforms_json_round_trips_cameras(tmp_path):
-    from pipeline.cameras import Camera, look_at
-
-    cams = CameraSet(cameras=[
-        Camera(name=f"v{i}", image=f"images/v{i}.jpg", width=64, height=48, fx=60.0 + i, fy=61.0, cx=31.5, cy=24.5,
-               camera_to_world=look_at(np.array([4.0 * np.cos(i), 4.0 * np.sin(i), 1.0 + i]), np.zeros(3)).tolist())
-        for i in range(3)
-    ])
-    save_transforms(tmp_path / "transforms.json", cams)
-    doc = read_json(tmp_path / "transforms.json")
-    assert "fl_x" in doc["frames"][0]  # focal lengths differ: per-frame intrinsics
-    # OpenGL axes in the file: the camera looks along its -z
-    np.testing.assert_allclose(np.asarray(doc["frames"][0]["transform_matrix"])[:3, 2], -cams.cameras[0].c2w[:3, 2])
-    back = load_transforms(tmp_path / "transforms.json")
-    assert not back.distortion
-    for a, b in zip(cams.cameras, back.cameras.cameras):
-        assert a.name == b.name
-        assert (a.fx, a.fy, a.cx, a.cy, a.width, a.height) == (b.fx, b.fy, b.cx, b.cy, b.width, b.height)
-        np.testing.assert_allclose(a.c2w, b.c2w, atol=1e-12)
-    np.testing.assert_array_equal(opengl_from_opencv(opengl_from_opencv(cams.cameras[0].c2w)), cams.cameras[0].c2w)
-
-
-def test_undistort_map_sends_pinhole_pixels_to_where_the_lens_put_them():
-    import pycolmap
-
-    from pipeline.undistort import undistort_map
-
-    cam = pycolmap.Camera(model="OPENCV", width=80, height=60, params=[70.0, 71.0, 40.3, 29.8, -0.2, 0.05, 1e-3, -2e-3])
-    mx, my, shift = undistort_map(cam)
-    assert mx.shape == (60, 80) and shift > 1.0
-    for x, y in [(0, 0), (79, 59), (10, 45), (40, 30)]:
-        ray = np.array([(x + 0.5 - 40.3) / 70.0, (y + 0.5 - 29.8) / 71.0, 1.0])
-        distorted = cam.img_from_cam(ray[None])[0]
-        np.testing.assert_allclose([mx[y, x] + 0.5, my[y, x] + 0.5], distorted, atol=1e-4)
 
 
 # ------------------------------------------------------------------------------------- known cameras

@@ -4,21 +4,18 @@ cameras), masks (its own masks), a few training steps, mesh, export and evaluate
 
 from __future__ import annotations
 
-import base64
 import json
 import shutil
 from html.parser import HTMLParser
 from pathlib import Path
 
-import numpy as np
 import pytest
+from helpers import png_data_uri_image
 
 from pipeline.cli import main
 from pipeline.errors import InputError
 from pipeline.layout import STAGES
-from pipeline.report.curves import read_metrics, training_curves
 from pipeline.report.page import text
-from pipeline.report.reader import figure_data_uri
 from pipeline.stages.report import run_report
 
 TINY = [
@@ -103,17 +100,6 @@ def _section(document: str, stage: str) -> str:
     return document[start : document.index("</section>", start)]
 
 
-def _png(src: str) -> np.ndarray:
-    import cv2
-
-    assert src.startswith("data:image/png;base64,"), src[:40]
-    data = base64.b64decode(src.split(",", 1)[1], validate=True)
-    assert data[:8] == b"\x89PNG\r\n\x1a\n"
-    image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
-    assert image is not None and image.size > 0
-    return image
-
-
 def test_the_report_of_a_whole_results_folder(results, tmp_path):
     out = tmp_path / "report"
     assert main(["report", str(results), "--out", str(out)]) == 0
@@ -124,7 +110,7 @@ def test_the_report_of_a_whole_results_folder(results, tmp_path):
     # self-contained: every picture embedded as a PNG, no script, no stylesheet or anything else fetched
     assert len(page.images) >= 30
     for src in page.images:
-        _png(src)
+        png_data_uri_image(src)
     assert "script" not in page.tags and "link" not in page.tags and "iframe" not in page.tags
     assert "http://" not in document and "https://" not in document
     # videos and the point cloud are linked relative to the page, and the links lead to the files
@@ -286,22 +272,3 @@ def test_not_a_results_folder(tmp_path, tiny_capture):
         run_report(tmp_path / "a_file")
     assert main(["report", str(tmp_path / "nowhere")]) == 2
     assert not (tmp_path / "nowhere").exists(), "nothing written"
-
-
-def test_training_curves_from_a_long_metrics_log(tmp_path):
-    """A long log (running mean drawn), NaN PSNRs, zero loss terms on log axes, and a damaged line."""
-    lines = [json.dumps({"step": s, "seconds": 0.1 * s, "phase": "mask" if s <= 50 else "joint", "loss": 1 / s,
-                         "psnr_object": float("nan") if s % 7 == 0 else 10 + s / 20, "beta": 0.1 / s, "lr": 1e-3,
-                         "mask": 0.1, "photometric": 0.0 if s <= 50 else 0.05}) for s in range(1, 301)]
-    path = tmp_path / "metrics.jsonl"
-    path.write_text("\n".join([*lines[:150], '{"step": 151, "lo', "", *lines[150:]]) + "\n")
-    rows, bad = read_metrics(path)
-    assert len(rows) == 300 and bad == 1
-    fig = training_curves(rows)
-    image = _png(figure_data_uri(fig))
-    assert image.shape[0] > 300 and image.shape[1] > 600
-    loss, psnr = fig.axes[0], fig.axes[1]
-    assert loss.get_yscale() == "log" and any("running mean" in t.get_text() for t in loss.get_legend().get_texts())
-    assert np.nanmax(psnr.lines[0].get_ydata()) == pytest.approx(10 + 300 / 20)
-    assert any(np.allclose(line.get_xdata(), 51)
-               for a in fig.axes for line in a.lines[1:] if len(line.get_xdata()) == 2)

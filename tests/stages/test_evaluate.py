@@ -1,7 +1,8 @@
-"""``orca evaluate`` against a ground truth made from the model's own renders: perfect scores when a result is
-compared with itself (also through a frame change that the camera alignment undoes), and the right worse
+"""The evaluate stage. Against a ground truth made from the model's own renders: perfect scores when a result
+is compared with itself (also through a frame change that the camera alignment undoes), and the right worse
 scores for known perturbations (rotated frame without alignment, noisy normals, a diffuse offset, rotated
-cameras, a scaled mesh). The alignment recovers a known similarity from camera centres."""
+cameras, a scaled mesh). End to end: a few training steps on the tiny synthetic capture, then
+``run_evaluate`` and ``orca evaluate`` against its ground truth."""
 
 from __future__ import annotations
 
@@ -12,29 +13,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import orbit_cameras, write_untrained_train_dir
+from helpers import moved_cameras, orbit_cameras, rotation, write_untrained_train_dir
 
-from pipeline.alignment import Similarity, align_cameras
+from pipeline.alignment import Similarity
 from pipeline.cameras import CameraSet, save_cameras
 from pipeline.errors import InputError
 from pipeline.imageio import read_exr, read_image, write_exr, write_png
 from pipeline.metrics import PSNR_CAP_DB
 from pipeline.stages.evaluate import run_evaluate
 
+# --------------------------------------------------------------------------- a result against its own renders
 
-def _rotation(axis, deg: float) -> np.ndarray:
-    axis = np.asarray(axis, np.float64) / np.linalg.norm(axis)
-    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    a = np.deg2rad(deg)
-    return np.eye(3) + np.sin(a) * k + (1 - np.cos(a)) * k @ k
-
-
-SIM = Similarity(1.7, _rotation([1, 2, 3], 40.0), np.array([0.5, -1.0, 2.0]))  # model frame -> "ground truth"
-
-
-def _moved(cams: CameraSet, sim: Similarity) -> CameraSet:
-    return CameraSet(cameras=[c.model_copy(update={"camera_to_world": sim.apply_c2w(c.c2w).tolist()})
-                              for c in cams.cameras])
+SIM = Similarity(1.7, rotation([1, 2, 3], 40.0), np.array([0.5, -1.0, 2.0]))  # model frame -> "ground truth"
 
 
 def ground_truth_from_model(train: Path, mesh: Path, out: Path, sim: Similarity | None = None) -> tuple[Path, Path]:
@@ -67,8 +57,8 @@ def ground_truth_from_model(train: Path, mesh: Path, out: Path, sim: Similarity 
         write_exr(out / "environment" / "rgb" / f"{cam.name}.exr", read_exr(work / "env" / f"{cam.name}_rgb.exr"))
         write_exr(out / "environment" / "depth" / f"{cam.name}.exr",
                   read_exr(work / "env" / f"{cam.name}_depth.exr") * np.float32(s))
-    save_cameras(out / "cameras.json", _moved(cams, sim))
-    save_cameras(out / "environment" / "cameras.json", _moved(env, sim))
+    save_cameras(out / "cameras.json", moved_cameras(cams, sim))
+    save_cameras(out / "environment" / "cameras.json", moved_cameras(env, sim))
     (out / "scene.json").write_text(json.dumps({
         "radiance_to_decoded": {"factor": 1.0},
         "object": {"centre": sim.translation.tolist(), "radius": 0.7 * s, "mesh": "object.ply"}, "props": []}))
@@ -165,7 +155,7 @@ def test_rotated_cameras_show_as_pose_errors_and_a_scaled_mesh_as_chamfer(tiny, 
     turned = []
     for c in result.cameras:
         c2w = c.c2w.copy()
-        c2w[:3, :3] = c2w[:3, :3] @ _rotation([0, 0, 1], 2.0)
+        c2w[:3, :3] = c2w[:3, :3] @ rotation([0, 0, 1], 2.0)
         turned.append(c.model_copy(update={"camera_to_world": c2w.tolist()}))
     cams2 = save_cameras(tmp_path / "turned.json", CameraSet(cameras=turned))
     bigger = o3d.io.read_triangle_mesh(str(mesh))
@@ -178,29 +168,6 @@ def test_rotated_cameras_show_as_pose_errors_and_a_scaled_mesh_as_chamfer(tiny, 
     # a sphere of radius 0.77 against 0.7: 0.07 each way, Chamfer (sum of both means) 0.14 = 0.2 radii
     assert res["mesh"]["chamfer_fraction"] == pytest.approx(0.2, rel=0.02)
     assert res["mesh"]["fscore_5pct"] < 0.05 and res["mesh"]["fscore_1pct"] == pytest.approx(0.0, abs=1e-3)
-
-
-def test_alignment_recovers_a_known_similarity_and_names_missing_cameras():
-    truth = orbit_cameras(8, prefix="IMG_")  # in the model's frame; the ground truth's is SIM of it
-    result = CameraSet(cameras=truth.cameras[:6])  # SfM lost two photos
-    align, report = align_cameras(result, _moved(truth, SIM), centre=SIM.translation)
-    np.testing.assert_allclose(align.matrix, SIM.matrix, atol=1e-9)
-    assert align.scale == pytest.approx(1.7)
-    assert report["missing"] == ["IMG_6", "IMG_7"] and report["summary"]["cameras"] == 6
-    assert report["summary"]["orbit_radius"] == pytest.approx(3.0 * 1.7)
-    assert report["summary"]["rotation_deg_max"] < 1e-6
-    # noisy centres: the errors are reported, in % of the orbit radius
-    rng = np.random.default_rng(1)
-    noisy = []
-    for c in truth.cameras:
-        c2w = c.c2w.copy()
-        c2w[:3, 3] += rng.normal(0, 0.03, 3)
-        noisy.append(c.model_copy(update={"camera_to_world": c2w.tolist()}))
-    noisy = CameraSet(cameras=noisy)
-    _, report = align_cameras(noisy, truth, centre=np.zeros(3))
-    assert 0.2 < report["summary"]["center_median_percent"] < 3.0  # ~ 0.03 x sqrt(3) / 3 = 1.7 %
-    with pytest.raises(InputError, match="in common"):
-        align_cameras(orbit_cameras(3, prefix="other"), truth)
 
 
 def test_orca_evaluate_on_a_results_folder(tiny, tmp_path):
@@ -221,3 +188,85 @@ def test_orca_evaluate_on_a_results_folder(tiny, tmp_path):
     assert main(["evaluate", str(results), "--ground-truth", str(gt), "--mesh", str(tmp_path / "none.ply"),
                  "--out", str(tmp_path / "x")]) == 2
     assert not (tmp_path / "x").exists()
+
+
+# ------------------------------------------------------------------------------------------------- end to end
+
+TINY = [
+    "train.iterations=4", "train.batch_rays=64", "train.mask_warmup=2", "train.logging.checkpoint_every=4",
+    "train.logging.preview_every=4", "train.logging.preview_downscale=4", "train.logging.log_every=2",
+    "train.render.n_coarse=8", "train.render.n_fine=4", "train.render.env_samples=6", "train.sdf.hash_grid.levels=4",
+    "train.sdf.hash_grid.log2_table_size=10", "train.environment.hash_grid.log2_table_size=10", "train.sdf.hidden=16",
+    "train.environment.hidden=16", "train.device=cpu",
+]
+
+
+@pytest.fixture(scope="module")
+def tiny_train(tiny_capture, tiny_decode, tmp_path_factory):
+    from pipeline.config import load_config
+    from pipeline.stages.train import run_train
+
+    gt = tiny_capture / "ground_truth"
+    out = tmp_path_factory.mktemp("eval") / "train"
+    cfg = load_config(preset="fast", overrides=TINY).train
+    assert run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, cfg) is not None
+    return out
+
+
+def test_run_evaluate_end_to_end(tiny_capture, tiny_train, tmp_path):
+    from pipeline.evaluation import ENVIRONMENT_METRICS, OBJECT_METRICS
+    from pipeline.stages.evaluate import run_evaluate
+
+    gt = tiny_capture / "ground_truth"
+    out = tmp_path / "evaluate"
+    res = run_evaluate(tiny_train, gt, out, views=1, downscale=2, device="cpu")
+    saved = json.loads((out / "evaluate.json").read_text())
+    assert saved["object"]["mean"] == res["object"]["mean"]
+    (view,) = saved["object"]["views"]
+    figures = saved["object"]["per_view"][view]
+    for key in OBJECT_METRICS:
+        assert figures[key] is not None and math.isfinite(figures[key]), key
+    assert 0 <= figures["mask_iou"] <= 1 and 0 <= figures["normal_mae_deg"] <= 180
+    assert figures["pixels"]["region"] > 0
+    assert "interior" in saved["object"]["region"], "the synthetic ground truth has coverage/: interior region"
+    env = saved["environment"]
+    assert env["views"] and set(env["per_view"]) == set(env["views"])
+    for key in ("psnr", "psnr_srgb", "ssim", "psnr_all", "ssim_all", "depth_absrel", "depth_rmse"):
+        assert env["mean"][key] is not None and math.isfinite(env["mean"][key]), key
+    assert set(env["mean"]) == set(ENVIRONMENT_METRICS)
+    assert sum(v["pixels"]["props"] for v in env["per_view"].values()) > 0, "props are seen from the centre"
+
+    from pipeline.imageio import read_exr, read_image
+
+    h, w = 36 // 2, 48 // 2
+    for suffix in ("rgb", "diffuse", "specular", "normal", "depth"):
+        assert read_exr(out / f"{view}_{suffix}.exr").shape[:2] == (h, w)
+    assert read_image(out / f"{view}_mask.png").shape == (h, w)
+    for name in env["views"]:
+        assert (out / f"env_{name}_rgb.exr").is_file() and (out / f"env_{name}_depth.exr").is_file()
+    for grid in ("object_grid.png", "environment_grid.png", "manifest.json"):
+        assert (out / grid).is_file(), grid
+
+
+def test_cli_evaluate_and_its_errors(tiny_capture, tiny_train, tmp_path):
+    from pipeline.cli import main
+
+    gt = tiny_capture / "ground_truth"
+    out = tmp_path / "ev"
+    assert main(["evaluate", str(tiny_train), "--ground-truth", str(gt), "--out", str(out), "--views", "1",
+                 "--downscale", "3", "--no-environment", "--device", "cpu"]) == 0
+    saved = json.loads((out / "evaluate.json").read_text())
+    assert "environment" not in saved and saved["object"]["downscale"] == 3
+
+    from pipeline.stages.evaluate import run_evaluate
+
+    with pytest.raises(InputError, match=r"model\.pt[\s\S]*orca train"):
+        run_evaluate(tmp_path, gt, tmp_path / "x", views=1, downscale=2)
+    no_env = tmp_path / "gt_no_env"
+    no_env.mkdir()
+    for name in ("cameras.json", "scene.json"):
+        (no_env / name).write_bytes((gt / name).read_bytes())
+    with pytest.raises(InputError, match="--no-environment"):
+        run_evaluate(tiny_train, no_env, tmp_path / "x", views=1, downscale=2)
+    assert not (tmp_path / "x").exists()
+    assert main(["evaluate", str(tiny_train), "--ground-truth", str(no_env), "--out", str(tmp_path / "x")]) == 2

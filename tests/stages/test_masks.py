@@ -1,0 +1,144 @@
+"""The masks stage: user masks of every encoding override on the tiny capture and follow the poses stage's
+undistortion, masks that do not fit are refused, and the automatic method on the 20-view synthetic sphere
+against its ground-truth masks."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from pipeline.artifacts import read_json
+from pipeline.cameras import load_cameras
+from pipeline.config import MasksConfig, PosesConfig
+from pipeline.errors import InputError
+from pipeline.imageio import read_image, write_png
+from pipeline.metrics import iou
+from pipeline.results import load_decode, load_masks
+from pipeline.stages.masks import run_masks
+from pipeline.stages.poses import run_poses
+from pipeline.transforms import to_transforms
+from pipeline.undistort import recorded_undistortion
+
+
+def known_poses(capture: Path, decode: Path, out: Path) -> Path:
+    """The poses stage on the capture's ground-truth cameras (the known-cameras path, no SfM)."""
+    shutil.copy(capture / "ground_truth" / "cameras.json", capture / "cameras.json")
+    try:
+        run_poses(capture, decode, out, PosesConfig(use_masks=False))
+    finally:
+        (capture / "cameras.json").unlink()
+    return out
+
+
+def test_user_masks_of_every_encoding_override_on_the_tiny_capture(tiny_capture, tiny_decode, tmp_path):
+    poses = known_poses(tiny_capture, tiny_decode, tmp_path / "poses")
+    truth_dir = tiny_capture / "ground_truth" / "masks"
+    names = sorted(p.stem for p in truth_dir.glob("*.png"))
+    user = tmp_path / "user"
+    user.mkdir()
+    for k, n in enumerate(names):  # a different encoding per view
+        m = read_image(truth_dir / f"{n}.png") > 127
+        if k % 3 == 0:
+            write_png(user / f"{n}.png", m.astype(np.uint8))  # 0/1
+        elif k % 3 == 1:
+            rgba = np.dstack([np.full(m.shape + (3,), 90, np.uint8), m.astype(np.uint8) * 255])
+            write_png(user / f"{n}.png", rgba)  # alpha channel
+        else:
+            write_png(user / f"{n}.png", m.astype(np.uint16) * 65535)  # 16-bit
+    result = run_masks(tiny_capture, poses, tmp_path / "masks", MasksConfig(), user_masks_dir=user)
+    out = load_masks(tmp_path / "masks")
+    for n in names:
+        np.testing.assert_array_equal(out.mask(n), read_image(truth_dir / f"{n}.png") > 127)
+    assert result.user == names
+    report = out.report
+    assert all(v["source"] == "user" for v in report["views"])
+    assert report["user_masks"]["views"] == names
+    for f in ("contact_sheet.jpg", "manifest.json", "cameras.json", *(f"overlays/{n}.jpg" for n in names)):
+        assert (tmp_path / "masks" / f).is_file(), f
+    # The re-normalized cameras: the tight sphere is the unit sphere; images still found.
+    sphere = report["object_sphere"]
+    assert 0.2 < sphere["radius"] <= 1.0
+    cams, before = out.cameras(), read_json(poses / "cameras.json")
+    c_old = np.asarray(before["cameras"][0]["camera_to_world"])[:3, 3]
+    c_new = cams.cameras[0].c2w[:3, 3]
+    np.testing.assert_allclose(c_new, (c_old - sphere["centre"]) / sphere["radius"], atol=1e-9)
+    assert all((tmp_path / "masks" / c.image).is_file() for c in cams.cameras)
+
+
+def test_user_masks_follow_the_poses_stage_undistortion(tiny_capture, tiny_decode, tmp_path):
+    """A user draws on the photos; when the poses stage resampled them to pinhole, the masks must be resampled
+    the same way, or they are off by the lens' shift (a few pixels towards the corners)."""
+    capture = tmp_path / "capture"
+    capture.mkdir()
+    doc = to_transforms(load_cameras(tiny_capture / "ground_truth" / "cameras.json"))
+    doc.update(k1=0.2, k2=0.02)
+    (capture / "transforms.json").write_text(json.dumps(doc))
+    poses = tmp_path / "poses"
+    run_poses(capture, tiny_decode, poses, PosesConfig(use_masks=False))
+    und = recorded_undistortion(load_decode(poses / "undistorted"))
+    assert und is not None and und.max_shift_px > 1
+    truth_dir = tiny_capture / "ground_truth" / "masks"
+    names = sorted(p.stem for p in truth_dir.glob("*.png"))
+    user = tmp_path / "user"
+    user.mkdir()
+    h, w = read_image(truth_dir / f"{names[0]}.png").shape[:2]
+    drawn = np.zeros((h, w), bool)
+    drawn[: h // 3, : w // 3] = True  # a block in the corner, where the lens moves pixels most
+    for n in names:
+        write_png(user / f"{n}.png", drawn.astype(np.uint8) * 255)
+    run_masks(capture, poses, tmp_path / "masks", MasksConfig(), user_masks_dir=user)
+    got = load_masks(tmp_path / "masks").mask(names[0])
+    assert iou(got, drawn) < 0.97, "the mask must move with the image"
+    np.testing.assert_array_equal(got, cv2.remap(drawn.astype(np.uint8), *und.maps[und.lens_of[names[0]]],
+                                                 cv2.INTER_NEAREST) > 0)
+
+
+def test_user_masks_that_do_not_fit_are_refused_with_the_fix(tiny_capture, tiny_decode, tmp_path):
+    poses = known_poses(tiny_capture, tiny_decode, tmp_path / "poses")
+    user = tmp_path / "user"
+    user.mkdir()
+    write_png(user / "IMG_0001.png", np.zeros((48, 36), np.uint8))
+    with pytest.raises(InputError, match="aspect ratio") as err:
+        run_masks(tiny_capture, poses, tmp_path / "masks", MasksConfig(), user_masks_dir=user)
+    assert "IMG_0001.png" in str(err.value) and "Fix:" in str(err.value)
+    (user / "IMG_0001.png").unlink()
+    write_png(user / "photo1.png", np.zeros((36, 48), np.uint8))
+    with pytest.raises(InputError, match="photo1.png"):
+        run_masks(tiny_capture, poses, tmp_path / "masks", MasksConfig(), user_masks_dir=user)
+    assert not (tmp_path / "masks").exists()
+
+
+def automatic(capture: Path, decode: Path, tmp_path: Path, config: MasksConfig, user: Path | None = None):
+    poses = known_poses(capture, decode, tmp_path / "poses")
+    started = time.time()
+    result = run_masks(capture, poses, tmp_path / "masks", config, user_masks_dir=user)
+    seconds = time.time() - started
+    truth = capture / "ground_truth" / "masks"
+    scores = {n: iou(read_image(tmp_path / "masks" / "masks" / f"{n}.png") > 127,
+                     read_image(truth / f"{n}.png") > 127) for n in result.names}
+    return result, scores, seconds
+
+
+@pytest.mark.slow
+def test_automatic_masks_of_the_sphere_with_two_corrections(sfm_sphere_capture, sfm_sphere_decode, tmp_path):
+    """20 views of the glossy sphere: automatic masks against the ground truth; two views get the user's
+    masks (corrections), which are written as given."""
+    user = tmp_path / "user"
+    user.mkdir()
+    for n in ("IMG_0003", "IMG_0011"):
+        shutil.copy(sfm_sphere_capture / "ground_truth" / "masks" / f"{n}.png", user / f"{n}.png")
+    result, scores, seconds = automatic(sfm_sphere_capture, sfm_sphere_decode, tmp_path, MasksConfig(), user)
+    auto = [s for n, s in scores.items() if n not in result.user]
+    print(f"sphere: IoU median {np.median(auto):.3f} worst {min(auto):.3f} in {seconds:.0f} s; {result.agreement}")
+    assert result.user == ["IMG_0003", "IMG_0011"] and scores["IMG_0003"] == scores["IMG_0011"] == 1.0
+    # the issue's goal is 0.95 / 0.85; measured: 0.972, 0.955 (doubtful votes 0.5; 0.965, 0.950 at 0.75; 0.952,
+    # 0.925 without them)
+    assert np.median(auto) >= 0.95 and min(auto) >= 0.93, scores
+    # the tight sphere: the true object (radius 1 in the ground truth's frame) nearly fills it
+    assert result.sphere_radius < 0.8
