@@ -19,6 +19,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from .alignment import fit_similarity
 from .cameras import CameraSet
 from .errors import InputError
 from .object_frame import project
@@ -77,8 +78,6 @@ CENTRE_FIT_TOLERANCE = 0.01
 def _frame_from_centres(centres: dict[str, np.ndarray], cameras: CameraSet, sparse_dir: Path) -> np.ndarray:
     """``(4, 4)`` similarity from the model's frame to the cameras', fitted on the centres of the photos both
     have."""
-    from .alignment import fit_similarity
-
     given = cameras.by_name()
     common = sorted(set(centres) & set(given))
     if len(common) < 3:

@@ -49,8 +49,9 @@ from typing import Any, Literal
 
 import numpy as np
 
-from ..artifacts import atomic_dir, write_json, write_manifest
+from ..artifacts import atomic_dir, atomic_path, write_json, write_manifest
 from ..cameras import CameraSet, Frame, save_cameras
+from ..dng import Exposure, SensorModel, decoded_from_linear, decoded_scale, write_dng
 from ..errors import InputError
 from ..imageio import to_srgb8, write_exr, write_png
 from ..layout import CAMERAS_JSON, CAPTURE_YAML, GROUND_TRUTH, MANIFEST
@@ -370,7 +371,6 @@ def _snap_shutter(seconds: float) -> float:
 def auto_exposure(spec: ExposureSpec, metering: float, reference_metering: float, rng: np.random.Generator):
     """EXIF settings for a view: the brightness change vs the reference, partly compensated, within
     ``max_stops``, realized as an ISO from ``iso_choices`` and the nearest standard shutter speed."""
-    from ..dng import Exposure
 
     stops = -spec.compensation * np.log2(max(metering, 1e-12) / max(reference_metering, 1e-12))
     stops = float(np.clip(stops, -spec.max_stops, spec.max_stops))
@@ -382,7 +382,6 @@ def auto_exposure(spec: ExposureSpec, metering: float, reference_metering: float
 
 def choose_gain(spec: ExposureSpec, linear: np.ndarray, exclude: np.ndarray) -> float:
     """``gain`` so the reference view's bright (non-light, non-object) pixels sit at ``white_level``."""
-    from ..dng import Exposure, SensorModel
 
     green = linear[..., 1][~exclude] if (~exclude).any() else linear[..., 1].ravel()
     bright = float(np.percentile(green, spec.white_percentile))
@@ -396,7 +395,6 @@ def _write_jpeg(path: Path, linear: np.ndarray, info: dict[str, Any], exposure, 
     from PIL import Image
     from PIL.TiffImagePlugin import IFDRational
 
-    from ..dng import SensorModel
 
     sensor = SensorModel()
     m = np.asarray(info["decoded_from_linear"], dtype=np.float64)
@@ -414,7 +412,6 @@ def _write_jpeg(path: Path, linear: np.ndarray, info: dict[str, Any], exposure, 
     sub[0x9003] = when.strftime("%Y:%m:%d %H:%M:%S")
     sub[0x920A] = IFDRational(round(focal_mm * 1000), 1000)
     sub[0xA405] = int(round(focal_35))
-    from ..artifacts import atomic_path
 
     with atomic_path(path) as tmp:
         Image.fromarray(to_srgb8(x.astype(np.float32))).save(tmp, format="JPEG", quality=spec.jpeg_quality,
@@ -431,7 +428,6 @@ def render_capture(scene: str | SceneSpec, out_dir: str | Path, options: SynthOp
     Everything is written into a temporary sibling folder that replaces ``out_dir`` only when all of it
     succeeded: an interrupted or failed render leaves nothing (and an existing folder untouched).
     """
-    from ..dng import Exposure, SensorModel, decoded_scale, write_dng
 
     options.validate()
     spec = get_scene(scene)
@@ -551,7 +547,6 @@ _PHOTO_KEYS = ("exposure", "gain", "raw_scale", "decoded_from_linear", "as_shot_
 
 def _simulated_info(exposure, gain: float) -> dict[str, Any]:
     """What :func:`pipeline.dng.write_dng` reports, for JPEG-only captures (no DNG written)."""
-    from ..dng import SensorModel, decoded_from_linear
 
     sensor = SensorModel()
     raw_scale = gain * exposure.value / sensor.full_scale_exposure

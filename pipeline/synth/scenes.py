@@ -17,6 +17,7 @@ from typing import Literal
 
 import numpy as np
 
+from ..errors import InputError
 from . import geometry
 from .textures import PosterStyle
 
@@ -195,8 +196,6 @@ def get_scene(name_or_spec: str | SceneSpec) -> SceneSpec:
         return name_or_spec
     key = str(name_or_spec).lower()
     if key not in SCENES:
-        from ..errors import InputError
-
         raise InputError(f"unknown scene {name_or_spec!r}; choose one of: {', '.join(SCENES)}")
     return SCENES[key]
 
