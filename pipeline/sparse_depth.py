@@ -58,7 +58,7 @@ def load_sparse_points(sparse_dir: Path, cameras: CameraSet, min_track: int = 3)
         from_colmap = np.linalg.inv(np.asarray(cameras.frame.to_colmap, dtype=np.float64))
     else:
         centres = {names[i]: image.projection_center() for i, image in rec.images.items() if image.has_pose}
-        from_colmap = _frame_from_centres(centres, cameras, sparse_dir)
+        from_colmap = frame_from_centres(centres, cameras, sparse_dir)
     xyz, observers, ids = [], [], []
     for point_id, point in rec.points3D.items():
         if point.track.length() >= min_track:
@@ -75,7 +75,7 @@ def load_sparse_points(sparse_dir: Path, cameras: CameraSet, min_track: int = 3)
 CENTRE_FIT_TOLERANCE = 0.01
 
 
-def _frame_from_centres(centres: dict[str, np.ndarray], cameras: CameraSet, sparse_dir: Path) -> np.ndarray:
+def frame_from_centres(centres: dict[str, np.ndarray], cameras: CameraSet, sparse_dir: Path) -> np.ndarray:
     """``(4, 4)`` similarity from the model's frame to the cameras', fitted on the centres of the photos both
     have."""
     given = cameras.by_name()

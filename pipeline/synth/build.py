@@ -134,7 +134,7 @@ def rectangle_transform(centre: np.ndarray, u: np.ndarray, v: np.ndarray):
     return _affine((u, v, n / np.linalg.norm(n)), centre)
 
 
-def _frame_for(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def rectangle_frame(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit tangents (u, v) with u x v = normal."""
     n = np.asarray(normal, float) / np.linalg.norm(normal)
     helper = np.array([0.0, 0.0, 1.0]) if abs(n[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
@@ -238,7 +238,7 @@ def scene_dict(scene: ResolvedScene, assets: SceneAssets, variant: Variant, max_
         material = _diffuse(0.0) if geometry_only else _diffuse(assets.bitmap(p.name))
         d.update(prop_shapes(p, material))
     for light in scene.lights:
-        u, v = _frame_for(np.array(light.normal))
+        u, v = rectangle_frame(np.array(light.normal))
         shape: dict[str, Any] = {
             "type": "rectangle",
             "to_world": rectangle_transform(np.array(light.centre), u * light.size[0] / 2, v * light.size[1] / 2),

@@ -82,7 +82,7 @@ def test_a_model_without_to_colmap_is_placed_by_its_camera_centres(tmp_path):
     from pipeline.alignment import Similarity
     from pipeline.cameras import Camera, CameraSet
     from pipeline.errors import InputError
-    from pipeline.sparse_depth import _frame_from_centres
+    from pipeline.sparse_depth import frame_from_centres
 
     rng = np.random.default_rng(1)
     centres = rng.normal(size=(6, 3)) * 3
@@ -91,12 +91,12 @@ def test_a_model_without_to_colmap_is_placed_by_its_camera_centres(tmp_path):
         Camera(name=f"v{i}", image=f"v{i}.png", width=W, height=H, fx=70, fy=70, cx=W / 2, cy=H / 2,
                camera_to_world=look_at(truth.apply(c), np.zeros(3)).tolist()) for i, c in enumerate(centres)])
     model = {f"v{i}": c for i, c in enumerate(centres)}
-    np.testing.assert_allclose(_frame_from_centres(model, cams, tmp_path), truth.matrix, atol=1e-9)
+    np.testing.assert_allclose(frame_from_centres(model, cams, tmp_path), truth.matrix, atol=1e-9)
     shuffled = dict(zip(model, centres[::-1]))  # the model of other photos
     with pytest.raises(InputError, match="do not fit"):
-        _frame_from_centres(shuffled, cams, tmp_path)
+        frame_from_centres(shuffled, cams, tmp_path)
     with pytest.raises(InputError, match="shares 2 photo"):
-        _frame_from_centres({k: model[k] for k in ("v0", "v1")}, cams, tmp_path)
+        frame_from_centres({k: model[k] for k in ("v0", "v1")}, cams, tmp_path)
 
 
 def test_the_far_bound_is_past_the_farthest_point_but_not_its_outliers():

@@ -19,7 +19,7 @@ from pipeline.cameras import load_cameras
 from pipeline.imageio import read_exr, read_image, srgb_to_linear
 from pipeline.synth import SCENES, SynthOptions, geometry, render_capture
 from pipeline.synth import render as synth_render
-from pipeline.synth.build import _frame_for
+from pipeline.synth.build import rectangle_frame
 from pipeline.synth.scenes import AlbedoSpec, SceneSpec, object_mesh, resolve, rotation_xyz
 from pipeline.synth.textures import PosterStyle, poster
 
@@ -90,7 +90,7 @@ def _hit_cylinder(o, d, centre, radius, height):
 
 
 def _hit_rectangle(o, d, centre, normal, size):
-    u, v = _frame_for(np.asarray(normal, float))
+    u, v = rectangle_frame(np.asarray(normal, float))
     n = np.asarray(normal, float) / np.linalg.norm(normal)
     with np.errstate(divide="ignore", invalid="ignore"):
         t = ((np.asarray(centre) - o) @ n) / (d @ n)
