@@ -69,6 +69,13 @@ def _alive(pid: int) -> bool:
 _HOST = socket.gethostname().split(".")[0].replace("-", "_") or "host"
 
 
+def _writer_gone(host: str | None, pid: str | None) -> bool:
+    """Whether the writer a temporary's name records (``<host>-<pid>``) has stopped: it ran on this machine and
+    its process is gone. A name without a writer (earlier versions) counts as stopped; one of another machine
+    cannot be checked and does not."""
+    return host in (None, _HOST) and (pid is None or not _alive(int(pid)))
+
+
 def _temporary_prefix(name: str) -> str:
     """``.<name>.<host>-<pid>.``: whoever finds the folder later can tell whether its writer still runs."""
     return f".{name}.{_HOST}-{os.getpid()}."
@@ -92,8 +99,7 @@ def remove_stale_temporaries(path: str | Path) -> list[Path]:
         m = pattern.match(entry.name)
         if not m or not entry.is_dir():
             continue
-        pid = m["pid"] or m["old"]
-        if m["host"] not in (None, _HOST) or (pid is not None and _alive(int(pid))):
+        if not _writer_gone(m["host"], m["pid"] or m["old"]):
             continue
         shutil.rmtree(entry, ignore_errors=True)
         removed.append(entry)
@@ -111,7 +117,7 @@ def remove_stale_temporary_files(folder: str | Path) -> list[Path]:
     removed = []
     for entry in folder.iterdir() if folder.is_dir() else ():
         m = pattern.match(entry.name)
-        if m and entry.is_file() and m["host"] == _HOST and not _alive(int(m["pid"])):
+        if m and entry.is_file() and _writer_gone(m["host"], m["pid"]):
             entry.unlink(missing_ok=True)
             removed.append(entry)
     if removed:
