@@ -84,8 +84,8 @@ class PosesConfig(StrictModel):
 
     known_poses: Literal["auto", "ignore"] = Field(
         "auto",
-        description="'auto': a capture folder's own cameras.json or transforms.json (turntable, phone AR) is used "
-        "and SfM is skipped; 'ignore': always run SfM.",
+        description="'auto': a capture folder's own cameras.json, transforms.json or poses_bounds.npy (LLFF) "
+        "(turntable, phone AR, another SfM run) is used and SfM is skipped; 'ignore': always run SfM.",
     )
     camera_model: Literal["auto", "SIMPLE_PINHOLE", "PINHOLE", "SIMPLE_RADIAL", "RADIAL", "OPENCV"] = Field(
         "auto",

@@ -1,7 +1,9 @@
-"""Known cameras instead of SfM: a capture's own ``cameras.json`` (our schema) or ``transforms.json``
-(nerfstudio/instant-ngp, OpenGL axes), from a turntable or a phone's AR session. Cameras are matched to photos
-by file stem; their intrinsics are scaled to the decoded size, and a transforms.json's distortion becomes the
-lens model (OPENCV, or FULL_OPENCV with k3/k4) that undistortion then removes.
+"""Known cameras instead of SfM: a capture's own ``cameras.json`` (our schema), ``transforms.json``
+(nerfstudio/instant-ngp, OpenGL axes) or ``poses_bounds.npy`` (LLFF, :mod:`pipeline.llff`), from a turntable,
+a phone's AR session or another SfM run. Cameras are matched to photos by file stem (LLFF's rows by
+``all_image_names.txt``, or by the photos' sorted order); their intrinsics are scaled to the decoded size, and
+a transforms.json's distortion becomes the lens model (OPENCV, or FULL_OPENCV with k3/k4) that undistortion
+then removes.
 """
 
 from __future__ import annotations
@@ -13,38 +15,48 @@ import numpy as np
 
 from .cameras import load_cameras
 from .errors import InputError
-from .layout import CAMERAS_JSON, TRANSFORMS_JSON
+from .layout import CAMERAS_JSON, POSES_BOUNDS, TRANSFORMS_JSON
+from .llff import load_poses_bounds
 from .object_frame import Posed
 from .signals import import_pycolmap
 from .transforms import load_transforms
 
 log = logging.getLogger("orca.poses")
 
+KNOWN_CAMERA_FILES = (CAMERAS_JSON, TRANSFORMS_JSON, POSES_BOUNDS)
+
 
 def find_known_cameras(capture_dir: Path, known_poses: str) -> Path | None:
     """The capture's known-cameras file, or None (none, or ``known_poses="ignore"``: SfM runs anyway).
 
     Raises:
-        InputError: the capture has both files.
+        InputError: the capture has more than one of the files.
     """
-    found = [capture_dir / f for f in (CAMERAS_JSON, TRANSFORMS_JSON) if (capture_dir / f).is_file()]
+    found = [capture_dir / f for f in KNOWN_CAMERA_FILES if (capture_dir / f).is_file()]
     if known_poses == "ignore" or not found:
         return None
     if len(found) > 1:
         raise InputError(
-            "the capture has both cameras.json and transforms.json: which cameras are right is ambiguous",
-            capture_dir, fix="remove one of them (or set poses.known_poses=ignore to run SfM instead)",
+            f"the capture has {' and '.join(p.name for p in found)}: which cameras are right is ambiguous",
+            capture_dir, fix="remove all but one of them (or set poses.known_poses=ignore to run SfM instead)",
         )
     return found[0]
 
 
 def posed_from_file(path: Path, names: list[str], width: int, height: int) -> Posed:
-    """Known cameras matched to the decoded photos by name, intrinsics scaled to the decoded size."""
+    """Known cameras matched to the decoded photos by name, intrinsics scaled to the decoded size.
+
+    Args:
+        names: the decoded photos' names in the sorted order of their file names (decode's order), which is
+            the order of an LLFF file's rows when no ``all_image_names.txt`` names them.
+    """
     pycolmap = import_pycolmap()
 
     if path.name == TRANSFORMS_JSON:
         known = load_transforms(path)
         cams, distortion = known.cameras.by_name(), known.distortion
+    elif path.name == POSES_BOUNDS:
+        cams, distortion = load_poses_bounds(path, names).cameras.by_name(), {}
     else:
         cams, distortion = load_cameras(path).by_name(), {}
     matched = [n for n in names if n in cams]

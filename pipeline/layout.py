@@ -1,8 +1,8 @@
 """Where everything lives: the capture folder's names, the stages in DAG order, and every artifact's path
 and file name. Stages, the Snakefile and the loaders (:mod:`pipeline.results`) spell names only through here.
 
-    captures/<capture>/             photos (or images/), capture.yaml, masks/, calibration/, cameras.json
-                                    or transforms.json (known cameras), ground_truth/ (synthetic captures)
+    captures/<capture>/             photos (or images/), capture.yaml, masks/, calibration/, cameras.json,
+                                    transforms.json or poses_bounds.npy (known cameras), ground_truth/ (synthetic)
     results/<capture>/<stage>/      one folder per stage, written atomically, each with manifest.json
 """
 
@@ -40,6 +40,7 @@ IMAGE_KINDS = LINEAR, SRGB, CLIPPED = ("linear", "srgb", "clipped")  # a folder 
 # poses
 CAMERAS_JSON = "cameras.json"  # also a capture's known cameras, and masks' re-normalized cameras
 TRANSFORMS_JSON = "transforms.json"
+POSES_BOUNDS, LLFF_IMAGE_NAMES = "poses_bounds.npy", "all_image_names.txt"  # LLFF known cameras (pipeline.llff)
 SPARSE = "sparse"  # COLMAP binary model
 SFM_DATABASE = "database.db"  # COLMAP's, kept with poses.keep_database
 UNDISTORTED = "undistorted"

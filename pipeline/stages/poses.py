@@ -5,8 +5,9 @@ the capture folder, where these are optional:
 
 - ``calibration/calibration.json`` (``orca calibrate``): OPENCV intrinsics, scaled to the decoded size and
   held fixed. Without it each lens/zoom shares one camera (:mod:`pipeline.sfm`).
-- ``cameras.json`` or ``transforms.json``: known cameras (:mod:`pipeline.known_cameras`). Then SfM is skipped
-  (``poses.known_poses=ignore`` runs it anyway; refining known cameras with SfM is not built).
+- ``cameras.json``, ``transforms.json`` or ``poses_bounds.npy`` (LLFF): known cameras
+  (:mod:`pipeline.known_cameras`). Then SfM is skipped (``poses.known_poses=ignore`` runs it anyway; refining
+  known cameras with SfM is not built).
 - ``masks/<name>.png`` (or ``--masks``; white = object): features on the glossy object are ignored (its
   reflections move with the viewpoint and make false matches), and the object's sphere is the masks'
   visual hull.
@@ -297,7 +298,8 @@ examples:
   orca poses captures/mug --set matcher=sequential --set num_threads=4
   orca poses captures/mug --set min_registered_fraction=0.5 --preset fast
 
-Known cameras: put cameras.json (orca schema) or transforms.json (nerfstudio) in the capture folder; SfM is
+Known cameras: put cameras.json (orca schema), transforms.json (nerfstudio) or poses_bounds.npy (LLFF, with
+all_image_names.txt naming its rows when it has more than the photos) in the capture folder; SfM is
 then skipped (--set known_poses=ignore runs it anyway). A calibration from `orca calibrate` in
 CAPTURE/calibration/calibration.json fixes the intrinsics. Output: cameras.json (normalized frame: the object
 in the unit sphere), transforms.json, sparse/ (COLMAP model), poses_report.json, poses.png, and undistorted/

@@ -92,6 +92,24 @@ def test_known_transforms_json_skips_sfm_and_round_trips(tiny_capture, tiny_deco
     np.testing.assert_allclose(again.c2w(), out.c2w(), atol=1e-9)
 
 
+def test_known_llff_poses_bounds_skips_sfm(tiny_capture, tiny_decode, tmp_path):
+    """A capture with LLFF's poses_bounds.npy (rows in the photos' order): the same cameras, to_colmap maps
+    them back to the file's frame."""
+    from pipeline.llff import save_poses_bounds
+
+    truth = load_cameras(tiny_capture / "ground_truth" / "cameras.json")
+    capture = tmp_path / "capture"
+    capture.mkdir()
+    save_poses_bounds(capture / "poses_bounds.npy", truth, np.ones((len(truth), 2)))
+    result = run(capture, tiny_decode, tmp_path / "poses")
+    assert result.source.endswith("poses_bounds.npy") and result.registered == len(truth)
+    out = load_cameras(tmp_path / "poses" / "cameras.json")
+    to_file = np.asarray(out.frame.to_colmap)
+    for a, b in zip(truth.cameras, out.cameras):
+        np.testing.assert_allclose(b.K, a.K, atol=1e-9)
+        np.testing.assert_allclose((to_file @ b.c2w)[:3, 3], a.center, atol=1e-9)
+
+
 def test_known_cameras_with_lens_distortion_are_undistorted(tiny_capture, tiny_decode, tmp_path):
     """Distortion in a transforms.json: the decoded images are resampled into undistorted/ (decode's layout,
     so `orca train --decode` reads it) and cameras.json points at them."""
