@@ -139,6 +139,42 @@ class PosesConfig(StrictModel):
     num_threads: int = Field(0, ge=0, description="CPU threads for pycolmap (0: all cores).")
     seed: int = Field(0, ge=0, description="random seed of RANSAC and the mapper.")
     keep_database: bool = Field(False, description="keep COLMAP's database.db (features, matches) in the output.")
+    on_suspect: Literal["warn", "drop", "error"] = Field(
+        "drop",
+        description="photos the pose checks doubt (pipeline/pose_checks.py: path jumps, axes that miss the object) "
+        "after the retry: 'drop' gives them no camera (a few photos fewer cost little; one wrong pose corrupts the "
+        "object and the environment field trained on it), 'warn' keeps them, 'error' stops the stage.",
+    )
+    jump_ratio: float = Field(
+        4.0, gt=1, description="a step between consecutive photos (capture order) longer than this times the median "
+        "step is a jump when the two share many matches (hand-held spacing varies up to ~3x; wrong poses on "
+        "repetitive textures jumped 9-16x)."
+    )
+    jump_min_match_share: float = Field(
+        0.3, ge=0, le=1, description="two consecutive photos look alike (a long step between them is a jump, not "
+        "photos missing from the capture) when they share at least this share of the median verified matches of "
+        "consecutive photos."
+    )
+    axis_miss_mads: float = Field(
+        5.0, gt=0, description="a camera's axis misses the others' convergence point suspiciously when it is more "
+        "than this many MADs (as standard deviations) above the median miss, and outside object_window."
+    )
+    up_max_deg: float = Field(
+        10.0, gt=0, le=90, description="warn when the plane under the object (RANSAC on the sparse points) is tilted "
+        "by more than this from the cameras' mean up (the masks stage searches the support plane within 10 degrees "
+        "of it)."
+    )
+    retry_matching: bool = Field(
+        True, description="when photos are doubted, run SfM again matching only neighbours in capture order with a "
+        "stricter two-view verification, and keep the run with more undoubted photos."
+    )
+    retry_overlap: int = Field(5, ge=1, description="retry: neighbours on each side in capture order matched.")
+    retry_min_inliers: int = Field(
+        30, ge=15, description="retry: verified matches a pair of photos needs (COLMAP's default is 15)."
+    )
+    retry_max_error_px: float = Field(
+        2.0, gt=0, description="retry: RANSAC's largest epipolar error in pixels (COLMAP's default is 4)."
+    )
 
 
 class MasksConfig(StrictModel):

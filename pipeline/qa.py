@@ -14,9 +14,10 @@ from .cameras import CameraSet
 
 
 def cameras_figure(path: Path, cameras: CameraSet, points: np.ndarray | None, colors: np.ndarray | None,
-                   report: dict[str, Any]) -> None:
+                   report: dict[str, Any], suspects: dict[str, np.ndarray] | None = None) -> None:
     """Top and side views of the cameras around the unit sphere (normalized frame), sparse points behind, the
-    poses report's summary as the title."""
+    poses report's summary as the title; ``suspects``: name -> ``(3,)`` centre of each photo the pose checks
+    doubt (kept or dropped), marked with a red cross and its name."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -39,6 +40,12 @@ def cameras_figure(path: Path, cameras: CameraSet, points: np.ndarray | None, co
         ax.quiver(centers[:, i], centers[:, j], dirs[:, i] * arrow, dirs[:, j] * arrow, angles="xy",
                   scale_units="xy", scale=1, color="tab:blue", width=0.004)
         ax.scatter(centers[:, i], centers[:, j], s=18, color="tab:blue", zorder=3, label="cameras")
+        if suspects:
+            doubted = np.stack(list(suspects.values()))
+            ax.scatter(doubted[:, i], doubted[:, j], s=60, marker="x", color="tab:red", zorder=4,
+                       label="doubtful pose")
+            for name, c in suspects.items():
+                ax.annotate(name, c[[i, j]], fontsize=7, color="tab:red", xytext=(3, -9), textcoords="offset points")
         step = max(1, len(centers) // 12)
         for k in range(0, len(centers), step):
             ax.annotate(cameras.cameras[k].name, centers[k, [i, j]], fontsize=7, xytext=(3, 3),
@@ -60,6 +67,10 @@ def cameras_figure(path: Path, cameras: CameraSet, points: np.ndarray | None, co
     missing = report["not_registered"]
     if missing:
         line += "\nno camera: " + ", ".join(missing[:12]) + (" ..." if len(missing) > 12 else "")
+    if suspects:
+        action = report.get("checks", {}).get("on_suspect", "warn")
+        line += (f"\ndoubtful poses ({'dropped' if action == 'drop' else 'kept'}, see poses_report.json checks): "
+                 + ", ".join(list(suspects)[:12]) + (" ..." if len(suspects) > 12 else ""))
     fig.suptitle(line, fontsize=10)
     fig.savefig(path, dpi=110)
     plt.close(fig)

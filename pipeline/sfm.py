@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import logging
 import os
+import shutil
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -33,6 +34,7 @@ from .layout import SFM_DATABASE, SRGB
 from .log import progress
 from .mask_file import read_mask
 from .object_frame import Posed
+from .pose_checks import PoseChecks, capture_order, check_poses
 from .signals import import_pycolmap
 
 if TYPE_CHECKING:
@@ -214,6 +216,7 @@ def run_sfm(
     feature_masks: Path | None = None,
     progress: Any = None,
     folder: Path | None = None,
+    retry: RetryMatching | None = None,
 ) -> SfmResult:
     """Features, matches and incremental mapping of the photos in ``groups`` (``image_dir/<name>.png``).
 
@@ -222,6 +225,7 @@ def run_sfm(
         feature_masks: folder with ``<name>.png.png`` masks (0 = ignore features there), COLMAP's layout.
         progress: a :func:`pipeline.log.progress` bar to advance while the mapper registers photos.
         folder: the folder error messages name (default ``image_dir``), e.g. the capture's photo folder.
+        retry: match as :class:`RetryMatching` says (a second run on photos the pose checks doubted).
 
     Raises:
         InputError: no features, no initial pair, or too few photos registered (see the module doc).
@@ -260,20 +264,20 @@ def run_sfm(
     check_features(features, pixel_std, config, folder)
 
     t = time.time()
-    matcher = config.matcher
+    matcher = config.matcher if retry is None else "neighbours"
     if matcher == "auto":
         matcher = "exhaustive" if len(names) <= config.exhaustive_max_images else "sequential"
     matching = pycolmap.FeatureMatchingOptions()
     matching.num_threads = threads
-    verification = pycolmap.TwoViewGeometryOptions()
-    verification.ransac.random_seed = config.seed
+    verification = verification_options(config, retry)
     if matcher == "exhaustive":
         num_pairs = len(names) * (len(names) - 1) // 2
         pycolmap.match_exhaustive(db_path, matching_options=matching, verification_options=verification,
                                   device=pycolmap.Device.auto)
     else:
         ordered = sorted(names)
-        pairs = sequential_pairs(ordered, config.sequential_overlap)
+        pairs = (sequential_pairs(ordered, config.sequential_overlap) if retry is None
+                 else neighbour_pairs(retry.order, retry.overlap))
         num_pairs = len(pairs)
         pair_file = work / "pairs.txt"
         pair_file.write_text("".join(f"{colmap_name(a)} {colmap_name(b)}\n" for a, b in pairs))
@@ -485,17 +489,18 @@ def write_feature_masks(files: dict[str, Path], size: tuple[int, int], folder: P
 
 def posed_from_sfm(decoded: DecodeArtifacts, names: list[str], calibration: tuple[str, list[float], Path] | None,
                    mask_files: dict[str, Path] | None, work: Path, config: PosesConfig,
-                   photo_dir: Path) -> tuple[Posed, pycolmap.Reconstruction]:
+                   photo_dir: Path, retry: RetryMatching | None = None) -> tuple[Posed, pycolmap.Reconstruction]:
     """The registered photos' cameras from SfM on the decoded sRGB images, features on the object ignored where
-    ``mask_files`` are given; and the reconstruction. ``work``: an empty folder to be (``database.db`` there)."""
+    ``mask_files`` are given; and the reconstruction. ``work``: an empty folder to be (``database.db`` there;
+    with ``retry``, a folder holding the first run's features in ``database.db``: they are reused)."""
     width, height = (int(v) for v in decoded.meta["size"])
     groups = camera_groups(decoded, names, width, height, config, calibration)
-    work.mkdir()
+    work.mkdir(exist_ok=retry is not None)
     feature_masks = (write_feature_masks(mask_files, (width, height), work / "feature_masks", config.mask_dilate_px)
                      if mask_files else None)
     with progress() as bar:
         sfm = run_sfm(decoded.folder / SRGB, groups, work, config, feature_masks=feature_masks, progress=bar,
-                      folder=photo_dir)
+                      folder=photo_dir, retry=retry)
     rec = sfm.reconstruction
     by_name = {stem_of(im.name): im for im in rec.images.values() if im.has_pose}
     posed_names = [n for n in names if n in by_name]
@@ -540,3 +545,185 @@ def _per_image_reprojection_error(rec: Any) -> dict[int, float]:
         for el in p.track.elements:
             sums.setdefault(el.image_id, []).append(p.error)
     return {i: float(np.mean(v)) for i, v in sums.items()}
+
+
+# --------------------------------------------------------------------- checked SfM (pipeline.pose_checks)
+
+
+@dataclass(frozen=True)
+class RetryMatching:
+    """How a second SfM run matches when the pose checks doubt photos: only neighbours in capture order (a
+    repetitive texture then cannot pair photos taken far apart), and a pair's two-view geometry needs more
+    inliers within a smaller error."""
+
+    order: tuple[str, ...]  # photo stems in capture order
+    overlap: int  # neighbours on each side
+    min_num_inliers: int
+    max_error_px: float
+
+
+@dataclass
+class CheckedSfm:
+    """The SfM run kept after the checks, and what each run gave."""
+
+    posed: Posed
+    reconstruction: pycolmap.Reconstruction
+    checks: PoseChecks
+    work: Path  # the kept run's folder (its database.db)
+    runs: list[dict[str, Any]]  # per run: matching, registered, flagged
+    folders: list[Path]  # every run's folder (to remove)
+
+
+def neighbour_pairs(names: Sequence[str], overlap: int, wrap: bool = True) -> list[tuple[str, str]]:
+    """Each photo with its ``overlap`` successors in the given order, and (``wrap``) the last ones with the first
+    ones (an orbit ends where it began); nothing farther apart, unlike :func:`sequential_pairs`."""
+    n = len(names)
+    pairs = set()
+    for i in range(n):
+        for s in range(1, overlap + 1):
+            j = i + s
+            if j >= n and not wrap:
+                break
+            j %= n
+            if i != j:
+                pairs.add((min(i, j), max(i, j)))
+    return [(names[i], names[j]) for i, j in sorted(pairs)]
+
+
+def verification_options(config: PosesConfig, retry: RetryMatching | None) -> pycolmap.TwoViewGeometryOptions:
+    """COLMAP's two-view verification, seeded; stricter for a retry."""
+    pycolmap = import_pycolmap()
+
+    verification = pycolmap.TwoViewGeometryOptions()
+    verification.ransac.random_seed = config.seed
+    if retry is not None:
+        verification.min_num_inliers = retry.min_num_inliers
+        verification.ransac.max_error = retry.max_error_px
+    return verification
+
+
+def consecutive_matches(db_path: Path, order: Sequence[str]) -> np.ndarray:
+    """``(N - 1,)`` verified matches between consecutive photos of ``order`` (image stems); 0 for a pair not
+    matched or not verified."""
+    pycolmap = import_pycolmap()
+
+    db = pycolmap.Database.open(db_path)
+    try:
+        ids = {stem_of(im.name): im.image_id for im in db.read_all_images()}
+        pair_ids, counts = db.read_two_view_geometry_num_inliers()
+        inliers = {int(p): int(k) for p, k in zip(pair_ids, counts)}
+        return np.array([inliers.get(int(pycolmap.image_pair_to_pair_id(ids[a], ids[b])), 0)
+                         for a, b in zip(order[:-1], order[1:])], float)
+    finally:
+        db.close()
+
+
+def checks_of(posed: Posed, db_path: Path, order: Sequence[str], order_by: str, config: PosesConfig) -> PoseChecks:
+    """:func:`pipeline.pose_checks.check_poses` on the registered photos of one run (``order``: all photos'
+    stems in capture order)."""
+    from .undistort import pinhole
+
+    index = {n: i for i, n in enumerate(posed.names)}
+    registered = [n for n in order if n in index]
+    K = np.stack([pinhole(c) for c in posed.lens])
+    sizes = np.array([[c.width, c.height] for c in posed.lens], float)
+    return check_poses(posed.names, posed.c2w, K, sizes, consecutive_matches(db_path, registered),
+                       np.array([index[n] for n in registered], int), order_by, posed.points, config)
+
+
+def posed_from_sfm_checked(decoded: DecodeArtifacts, names: list[str],
+                           calibration: tuple[str, list[float], Path] | None, mask_files: dict[str, Path] | None,
+                           work: Path, config: PosesConfig, photo_dir: Path) -> CheckedSfm:
+    """:func:`posed_from_sfm`, then the pose checks; when they doubt photos (and ``poses.retry_matching``), a
+    second run with :class:`RetryMatching` in ``work`` + ``_retry`` on the first run's features. The run with more
+    undoubted photos is kept (registered less doubted; a tie: the fewer doubted). A retry that fails (too few
+    photos register under the stricter matching) keeps the first run."""
+    times = [(decoded.entry(n).get("exif") or {}).get("datetime") for n in names]
+    index, order_by = capture_order(names, times)
+    order = [names[i] for i in index]
+    posed, rec = posed_from_sfm(decoded, names, calibration, mask_files, work, config, photo_dir)
+    checks = checks_of(posed, work / SFM_DATABASE, order, order_by, config)
+    runs = [_run_summary(config.matcher, posed, checks)]
+    folders = [work]
+    kept = CheckedSfm(posed, rec, checks, work, runs, folders)
+    if not checks.flagged or not config.retry_matching:
+        return kept
+    log.warning("pose checks doubt %d of %d photos (%s); SfM again, matching only neighbours in %s order with "
+                "a stricter verification", len(checks.flagged), len(posed.names), ", ".join(checks.flagged[:12]),
+                order_by)
+    retry_work = work.parent / f"{work.name}_retry"
+    retry_work.mkdir()
+    folders.append(retry_work)
+    shutil.copy2(work / SFM_DATABASE, retry_work / SFM_DATABASE)
+    _clear_matches(retry_work / SFM_DATABASE)
+    retry = RetryMatching(tuple(order), config.retry_overlap, config.retry_min_inliers, config.retry_max_error_px)
+    try:
+        posed2, rec2 = posed_from_sfm(decoded, names, calibration, mask_files, retry_work, config, photo_dir, retry)
+    except InputError as e:
+        log.warning("the stricter SfM run failed (%s); keeping the first", e.message)
+        runs.append({"matching": "neighbours, strict", "failed": e.message})
+        return kept
+    checks2 = checks_of(posed2, retry_work / SFM_DATABASE, order, order_by, config)
+    runs.append(_run_summary("neighbours, strict", posed2, checks2))
+    if _undoubted(posed2, checks2) > _undoubted(posed, checks):
+        log.info("the stricter SfM run is kept: %d photos registered, %d doubted (first run: %d, %d)",
+                 len(posed2.names), len(checks2.flagged), len(posed.names), len(checks.flagged))
+        return CheckedSfm(posed2, rec2, checks2, retry_work, runs, folders)
+    log.info("the first SfM run is kept: the stricter one registered %d photos, %d doubted", len(posed2.names),
+             len(checks2.flagged))
+    return kept
+
+
+def act_on_suspects(posed: Posed, checks: PoseChecks, total: int, config: PosesConfig, folder: Path) -> Posed:
+    """``poses.on_suspect`` on the photos ``checks`` doubt: the cameras to keep (``warn``: all; ``drop``: the
+    others), each doubt logged.
+
+    Raises:
+        InputError: ``error`` and photos are doubted; or ``drop`` leaves fewer photos than required.
+    """
+    if not checks.flagged:
+        return posed
+    for line in checks.warnings():
+        log.warning("doubtful pose: %s", line)
+    shown = ", ".join(checks.flagged[:20]) + (" ..." if len(checks.flagged) > 20 else "")
+    fix = ("look at poses.png and poses_report.json (checks); " + FIX_OVERLAP + "; or set poses.on_suspect=drop "
+           "(no camera for them) or warn (keep them)")
+    if config.on_suspect == "error":
+        raise InputError(f"{len(checks.flagged)} photos have doubtful poses (poses.on_suspect=error): {shown}",
+                         folder, fix=fix)
+    if config.on_suspect == "warn":
+        log.warning("%d photos have doubtful poses and are kept (poses.on_suspect=warn): %s", len(checks.flagged),
+                    shown)
+        return posed
+    kept = [i for i, n in enumerate(posed.names) if n not in set(checks.flagged)]
+    needed = required_registered(total, config)
+    if len(kept) < needed:
+        raise InputError(f"{len(checks.flagged)} of {len(posed.names)} registered photos have doubtful poses "
+                         f"({shown}); without them {len(kept)} of {total} remain, at least {needed} needed", folder,
+                         fix=fix)
+    log.warning("%d photos have doubtful poses and get no camera (poses.on_suspect=drop): %s", len(checks.flagged),
+                shown)
+    return Posed([posed.names[i] for i in kept], posed.c2w[kept], [posed.lens[i] for i in kept], posed.points,
+                 posed.point_colors, posed.stats)
+
+
+def _run_summary(matching: str, posed: Posed, checks: PoseChecks) -> dict[str, Any]:
+    return {"matching": matching, "registered": len(posed.names), "flagged": checks.flagged,
+            "mean_reprojection_error_px": posed.stats["mean_reprojection_error_px"]}
+
+
+def _undoubted(posed: Posed, checks: PoseChecks) -> tuple[int, int]:
+    """(registered photos the checks do not doubt, minus the doubted ones): compared in that order."""
+    return len(posed.names) - len(checks.flagged), -len(checks.flagged)
+
+
+def _clear_matches(db_path: Path) -> None:
+    """Keep a database's features, forget its matches (a new matching run starts from there)."""
+    pycolmap = import_pycolmap()
+
+    db = pycolmap.Database.open(db_path)
+    try:
+        db.clear_matches()
+        db.clear_two_view_geometries()
+    finally:
+        db.close()

@@ -75,10 +75,11 @@ from ..layout import (
 from ..log import collect_warnings
 from ..mask_file import read_mask
 from ..object_frame import ObjectSphere, Posed, find_object, normalized_cameras, normalizing_similarity
+from ..pose_checks import PoseChecks, frame_up_check
 from ..provenance import FORCE_HELP, check_capture_folder, common_capture
 from ..qa import cameras_figure
 from ..results import load_decode
-from ..sfm import check_not_identical, posed_from_sfm, quiet_colmap, thumbnail
+from ..sfm import act_on_suspects, check_not_identical, posed_from_sfm_checked, quiet_colmap, thumbnail
 from ..transforms import save_transforms
 from ..undistort import UndistortMaps, pinhole, undistort_mask, undistortion, write_undistorted
 
@@ -133,6 +134,7 @@ def run_poses(
 
     sources = [p for p in (capture_dir, decode_dir, masks_dir) if p is not None]
     with collect_warnings(log) as warnings, atomic_dir(out_dir, POSES, sources) as tmp:
+        checks, checks_runs, suspects = None, [], {}  # pose checks: SfM only
         if known_file is not None:
             log.info("known cameras: %s (SfM skipped)", known_file)
             posed = posed_from_file(known_file, names, width, height)
@@ -142,13 +144,17 @@ def run_poses(
             if duplicates:
                 log.warning("near-identical photos (the camera did not move between them): %s",
                             "; ".join(", ".join(g) for g in duplicates))
-            posed, reconstruction = posed_from_sfm(decoded, names, calibration, mask_files, tmp / "work", config,
-                                                   photo_dir)
+            sfm = posed_from_sfm_checked(decoded, names, calibration, mask_files, tmp / "work", config, photo_dir)
+            posed, reconstruction, checks = sfm.posed, sfm.reconstruction, sfm.checks
             (tmp / SPARSE).mkdir()
             reconstruction.write(tmp / SPARSE)
             if config.keep_database:
-                shutil.move(str(tmp / "work" / SFM_DATABASE), str(tmp / SFM_DATABASE))
-            shutil.rmtree(tmp / "work")
+                shutil.move(str(sfm.work / SFM_DATABASE), str(tmp / SFM_DATABASE))
+            for work in sfm.folders:
+                shutil.rmtree(work)
+            suspects = {n: posed.c2w[posed.names.index(n), :3, 3] for n in checks.flagged}
+            posed = act_on_suspects(posed, checks, len(names), config, photo_dir)
+            checks_runs = sfm.runs
             source = "sfm"
             if duplicates:
                 posed.stats["duplicates"] = duplicates
@@ -175,9 +181,12 @@ def run_poses(
         save_transforms(tmp / TRANSFORMS_JSON, cameras, image_of)
         points_n = to_source.inverse().apply(posed.points) if posed.points is not None else None
         report = _report(posed, names, source, sphere, to_source, undistort, config, cameras)
+        if checks is not None:
+            report["checks"] = _checks_report(checks, checks_runs, posed, K, sizes, sphere, config)
         report["warnings"] = list(warnings)
         write_json(tmp / POSES_REPORT, report)
-        cameras_figure(tmp / POSES_FIGURE, cameras, points_n, posed.point_colors, report)
+        suspects_n = {n: to_source.inverse().apply(c[None])[0] for n, c in suspects.items()}
+        cameras_figure(tmp / POSES_FIGURE, cameras, points_n, posed.point_colors, report, suspects_n)
         write_manifest(tmp, stage=POSES, inputs=inputs, config=config.model_dump(mode="json"), started=started,
                        extra={"source": source}, capture=capture)
     seconds = time.time() - started
@@ -287,6 +296,19 @@ def _report(posed: Posed, names: list[str], source: str, sphere: ObjectSphere, t
         "thresholds": {"min_registered": config.min_registered,
                        "min_registered_fraction": config.min_registered_fraction},
     }
+
+
+def _checks_report(checks: PoseChecks, runs: list[dict[str, Any]], posed: Posed, K: np.ndarray, sizes: np.ndarray,
+                   sphere: ObjectSphere, config: PosesConfig) -> dict[str, Any]:
+    """The pose checks for the report, the up check redone on the cameras kept and the frame's own up; its
+    warning logged."""
+    if posed.points is not None:
+        checks.up = frame_up_check(posed.points, posed.c2w, K, sizes, sphere.up, sphere.center, config)
+    if checks.up is not None and checks.up.warning():
+        log.warning("%s", checks.up.warning())
+    kept = set(posed.names)
+    return {**checks.to_json(), "on_suspect": config.on_suspect, "runs": runs,
+            "dropped": [n for n in checks.flagged if n not in kept]}
 
 
 # ---------------------------------------------------------------------------------------------------- CLI

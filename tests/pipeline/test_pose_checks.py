@@ -1,0 +1,210 @@
+"""Checks of SfM's cameras (pipeline.pose_checks): analytic orbits with displaced, turned and missing cameras,
+a tilted floor; and a rendered capture in a room of plain tiles through the poses stage."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import rotation
+
+from pipeline.cameras import look_at
+from pipeline.config import PosesConfig
+from pipeline.pose_checks import (
+    axes_misses,
+    capture_order,
+    check_poses,
+    consistent_path,
+    path_jumps,
+    up_check,
+)
+
+CONFIG = PosesConfig()
+W, H, F = 640, 480, 560.0
+
+
+def orbit(n: int = 36, radius: float = 3.0, height: float = 1.2, seed: int = 0, span_deg: float = 360.0,
+          skip: tuple[int, ...] = ()) -> np.ndarray:
+    """``(n - len(skip), 4, 4)`` hand-held-like cameras on a circle around the origin looking at it (small
+    aim and spacing jitter), photos ``skip`` left out."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(n):
+        a = np.deg2rad(span_deg * i / n + rng.uniform(-2, 2))
+        eye = np.array([radius * np.cos(a), radius * np.sin(a), height + rng.uniform(-0.1, 0.1)])
+        if i not in skip:
+            out.append(look_at(eye, rng.normal(0, 0.05, 3)))
+    return np.stack(out)
+
+
+def intrinsics(n: int) -> tuple[np.ndarray, np.ndarray]:
+    K = np.tile(np.array([[F, 0, W / 2], [0, F, H / 2], [0, 0, 1.0]]), (n, 1, 1))
+    return K, np.tile([W, H], (n, 1)).astype(float)
+
+
+def names_of(n: int) -> list[str]:
+    return [f"IMG_{i:03d}" for i in range(n)]
+
+
+def steady_matches(n: int, seed: int = 1) -> np.ndarray:
+    """``(n - 1,)`` verified matches of consecutive photos of a steady walk: all alike."""
+    return np.random.default_rng(seed).integers(600, 900, n - 1).astype(float)
+
+
+def floor_points(n: int = 400, tilt_deg: float = 0.0, seed: int = 2) -> np.ndarray:
+    """``(n, 3)`` points on the floor under the object (z = -1 tilted by ``tilt_deg`` about x), with noise, and a
+    fifth as many scattered above it (the object's reflections, props)."""
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(-1.5, 1.5, (n, 2))
+    floor = np.column_stack([xy, np.full(n, -1.0) + rng.normal(0, 0.003, n)])
+    floor = floor @ rotation([1, 0, 0], tilt_deg).T
+    clutter = rng.uniform(-1, 1, (n // 5, 3)) * [1.0, 1.0, 0.8]
+    return np.concatenate([floor, clutter])
+
+
+# ------------------------------------------------------------------------------------------------ order
+
+
+def test_capture_order_by_time_when_every_photo_has_one():
+    names = ["b", "a", "c"]
+    order, by = capture_order(names, ["2024:01:01 10:00:05", "2024:01:01 10:00:09", "2024:01:01 10:00:01"])
+    assert by == "capture time" and [names[i] for i in order] == ["c", "b", "a"]
+    order, by = capture_order(names, ["2024:01:01 10:00:05", None, "2024:01:01 10:00:01"])
+    assert by == "file name" and [names[i] for i in order] == ["a", "b", "c"]
+    order, by = capture_order(names, ["2024:01:01 10:00:05"] * 3)  # one burst: nothing to order by
+    assert by == "file name" and [names[i] for i in order] == ["a", "b", "c"]
+
+
+# ------------------------------------------------------------------------------------------------- path
+
+
+def test_a_smooth_orbit_passes_every_check():
+    c2w = orbit()
+    n = len(c2w)
+    K, sizes = intrinsics(n)
+    checks = check_poses(names_of(n), c2w, K, sizes, steady_matches(n), np.arange(n), "file name",
+                         floor_points(), CONFIG)
+    assert checks.flagged == [] and checks.warnings() == []
+    assert checks.up is not None and checks.up.angle_deg < 1.0 and checks.up.plane_points >= 100
+    assert checks.axis_median_deg < 3.0
+
+
+def test_displaced_cameras_are_flagged_and_only_they():
+    c2w = orbit()
+    n = len(c2w)
+    moved = c2w.copy()
+    # Two photos registered where the orbit is on the other side (repetitive tiles look the same there), one
+    # more elsewhere: each SfM pose is a real camera's pose, only at the wrong place in the sequence.
+    moved[10], moved[11], moved[25] = c2w[28], c2w[29], c2w[3]
+    names = names_of(n)
+    suspects, median_step, _ = path_jumps(names, moved[:, :3, 3], steady_matches(n), CONFIG.jump_ratio,
+                                          CONFIG.jump_min_match_share)
+    assert sorted({s.name for s in suspects}) == ["IMG_010", "IMG_011", "IMG_025"]
+    assert all(s.check == "path_jump" and s.value > 8 for s in suspects)  # steps across the orbit: ~10x
+    assert "IMG_009" in suspects[0].reason and "IMG_012" in suspects[0].reason  # the jumps it measured
+    K, sizes = intrinsics(n)
+    checks = check_poses(names, moved, K, sizes, steady_matches(n), np.arange(n), "file name", None, CONFIG)
+    assert sorted(checks.flagged) == ["IMG_010", "IMG_011", "IMG_025"]  # their axes still meet the object
+
+
+def test_a_displaced_run_at_the_start_is_flagged_not_the_rest():
+    c2w = orbit()
+    moved = c2w.copy()
+    moved[:2] = c2w[18:20]
+    suspects, _, _ = path_jumps(names_of(len(c2w)), moved[:, :3, 3], steady_matches(len(c2w)), 4.0, 0.3)
+    assert sorted({s.name for s in suspects}) == ["IMG_000", "IMG_001"]
+
+
+def test_a_gap_of_missing_photos_is_not_a_jump():
+    # 8 photos (80 degrees) of the orbit never taken: the step across the gap is ~9x the median, but the
+    # two photos on either side share few matches (they do not look alike).
+    c2w = orbit(skip=tuple(range(12, 20)))
+    n = len(c2w)
+    matches = steady_matches(n)
+    steps = np.linalg.norm(np.diff(c2w[:, :3, 3], axis=0), axis=1)
+    across = int(np.argmax(steps))
+    assert steps[across] > 7 * np.median(steps)
+    matches[across] = 40.0
+    K, sizes = intrinsics(n)
+    checks = check_poses(names_of(n), c2w, K, sizes, matches, np.arange(n), "file name", None, CONFIG)
+    assert checks.flagged == []
+    # The same step between photos that do look alike is a jump: one side is flagged, not both.
+    matches[across] = 700.0
+    suspects, _, _ = path_jumps(names_of(n), c2w[:, :3, 3], matches, 4.0, 0.3)
+    assert 0 < len({s.name for s in suspects}) <= n // 2
+
+
+def test_consistent_path_keeps_everything_without_jumps():
+    c2w = orbit(span_deg=180)
+    keep = consistent_path(c2w[:, :3, 3], np.ones(len(c2w) - 1, bool), 4.0 * 0.3, 0.3)
+    assert keep.all()
+
+
+def test_time_order_is_what_the_path_check_walks():
+    # Names shuffled against the capture: in name order every step jumps; in time order none does.
+    c2w = orbit()
+    n = len(c2w)
+    perm = np.random.default_rng(5).permutation(n)
+    names = [f"IMG_{k:03d}" for k in perm]  # photo i of the walk is named IMG_{perm[i]}
+    times = [f"2024:05:01 10:{i // 60:02d}:{i % 60:02d}" for i in range(n)]
+    order, by = capture_order(names, times)
+    assert by == "capture time" and list(order) == list(range(n))
+    K, sizes = intrinsics(n)
+    checks = check_poses(names, c2w, K, sizes, steady_matches(n), order, by, None, CONFIG)
+    assert checks.flagged == []
+
+
+# ------------------------------------------------------------------------------------------------- axes
+
+
+def test_a_camera_turned_away_is_flagged():
+    c2w = orbit()
+    n = len(c2w)
+    turned = c2w.copy()
+    turned[7, :3, :3] = c2w[7, :3, :3] @ rotation([0, 1, 0], 150)  # looks out of the orbit
+    turned[20, :3, :3] = c2w[20, :3, :3] @ rotation([1, 0, 0], 35)  # looks at the ceiling above the object
+    K, sizes = intrinsics(n)
+    suspects, median, note = axes_misses(names_of(n), turned, K, sizes, CONFIG.object_window, CONFIG.axis_miss_mads)
+    assert note is None and median < 3.0
+    found = {s.name: s for s in suspects}
+    assert sorted(found) == ["IMG_007", "IMG_020"]
+    assert found["IMG_007"].check == "looks_away" and found["IMG_020"].check == "axis_miss"
+    assert 30 < found["IMG_020"].value < 40
+
+
+def test_axes_of_a_forward_facing_capture_are_not_checked():
+    c2w = np.stack([look_at(np.array([x, -3.0, 0.0]), np.array([x, 0.0, 0.0])) for x in np.linspace(-1, 1, 8)])
+    K, sizes = intrinsics(len(c2w))
+    suspects, _, note = axes_misses(names_of(len(c2w)), c2w, K, sizes, 0.6, 5.0)
+    assert suspects == [] and "parallel" in note
+
+
+# --------------------------------------------------------------------------------------------------- up
+
+
+@pytest.mark.parametrize("tilt, disagrees", [(0.0, False), (4.0, False), (20.0, True)])
+def test_up_against_the_floor(tilt, disagrees):
+    check = up_check(floor_points(tilt_deg=tilt), np.array([0.0, 0.0, 1.0]), np.zeros(3), CONFIG.up_max_deg)
+    assert check.angle_deg == pytest.approx(tilt, abs=0.5)
+    assert check.disagrees is disagrees
+    assert (check.warning() is not None) is disagrees
+
+
+def test_up_without_a_clear_plane_gives_no_angle():
+    rng = np.random.default_rng(3)
+    check = up_check(rng.uniform(-1, 1, (200, 3)), np.array([0.0, 0.0, 1.0]), np.zeros(3), 10.0)
+    assert check.angle_deg is None and not check.disagrees
+
+
+def test_report_lists_each_flagged_photo_with_its_reason():
+    c2w = orbit()
+    n = len(c2w)
+    moved = c2w.copy()
+    moved[5] = c2w[23]
+    moved[30, :3, :3] = c2w[30, :3, :3] @ rotation([0, 1, 0], 120)
+    K, sizes = intrinsics(n)
+    checks = check_poses(names_of(n), moved, K, sizes, steady_matches(n), np.arange(n), "file name",
+                         floor_points(tilt_deg=15), CONFIG)
+    report = checks.to_json()
+    assert report["flagged"] == ["IMG_005", "IMG_030"]
+    assert {s["check"] for s in report["suspects"]} == {"path_jump", "looks_away"}
+    assert report["up"]["disagrees"] and len(checks.warnings()) == 3
