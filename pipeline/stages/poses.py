@@ -16,6 +16,13 @@ SfM (:mod:`pipeline.sfm`): bad input stops the stage with an :class:`~pipeline.e
 the folder and the fix: identical photos, no features, no initial pair, too few photos registered
 (``poses.min_registered``, ``poses.min_registered_fraction``).
 
+Checks (:mod:`pipeline.pose_checks`, SfM only): registered is not right (repetitive textures put photos where
+others look the same). Photos whose camera jumps away from its capture neighbours or whose axis misses the
+object are doubted; SfM runs again with neighbour-only, stricter matching and the better run is kept
+(:func:`pipeline.sfm.posed_from_sfm_checked`); photos still doubted are dropped, kept or stop the stage
+(``poses.on_suspect``). The up direction is compared with the plane under the object. ``poses_report.json``'s
+``checks`` lists each doubted photo and why; ``poses.png`` marks them.
+
 Normalization (:mod:`pipeline.object_frame`): the object's centre is where the optical axes converge, its
 radius from the framing, the support plane or the masks; the normalized frame has the object's bounding
 sphere as the unit sphere, z up. ``cameras.json``'s ``frame.to_colmap`` is the 4x4 similarity from the
