@@ -20,14 +20,14 @@ Variants of one scene (same geometry, same shape order, so shape indices agree):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 
 from .scenes import ResolvedProp, ResolvedScene
-from .textures import poster
+from .textures import poster, tile
 
 Variant = Literal["full", "diffuse", "specular", "coverage", "environment"]
 OBJECT_ID = "object"
@@ -37,6 +37,9 @@ SPECULAR_ONLY_DIFFUSE = 1e-6
 
 # OpenCV camera axes (x right, y down, z forward) -> Mitsuba's (x left, y up, z forward).
 CV_TO_MITSUBA = np.diag([-1.0, -1.0, 1.0, 1.0])
+
+# Tile textures have at least this many texels across a grout line, so the lines stay crisp up close.
+MIN_GROUT_TEXELS = 2.0
 
 
 def mitsuba():
@@ -53,15 +56,25 @@ def mitsuba():
 
 @dataclass
 class SceneAssets:
-    """Everything that is costly to make once per scene: textures (linear reflectance arrays)."""
+    """Everything that is costly to make once per scene: textures (linear reflectance arrays), and how each
+    surface or prop uses them."""
 
     textures: dict[str, np.ndarray]  # surface name -> (H, W, 3) float32
     object_ply: Path | None  # the object's mesh file (None for the analytic sphere)
+    plain: dict[str, tuple[float, float, float]] = field(default_factory=dict)  # name -> uniform reflectance
+    repeats: dict[str, tuple[float, float]] = field(default_factory=dict)  # name -> texture repeats along (u, v)
 
     def bitmap(self, name: str) -> dict[str, Any]:
         mi = mitsuba()
-        return {"type": "bitmap", "bitmap": mi.Bitmap(self.textures[name]), "filter_type": "bilinear",
-                "wrap_mode": "repeat"}
+        d = {"type": "bitmap", "bitmap": mi.Bitmap(self.textures[name]), "filter_type": "bilinear",
+             "wrap_mode": "repeat"}
+        if name in self.repeats:
+            d["to_uv"] = mi.ScalarTransform4f.scale([*self.repeats[name], 1.0])
+        return d
+
+    def material(self, name: str) -> dict[str, Any]:
+        """The diffuse BSDF of a room surface or prop: plain paint or its texture."""
+        return _diffuse(self.plain[name]) if name in self.plain else _diffuse(self.bitmap(name))
 
 
 def _texture_size(extent_u: float, extent_v: float, texels_per_unit: float, max_size: int) -> tuple[int, int]:
@@ -92,13 +105,30 @@ def room_surfaces(scene: ResolvedScene) -> dict[str, tuple[np.ndarray, np.ndarra
 
 
 def make_assets(scene: ResolvedScene, object_ply: Path | None) -> SceneAssets:
-    """Generate every poster texture of the scene (deterministic in ``scene.spec.texture_seed``)."""
+    """Generate every texture of the scene (posters deterministic in ``scene.spec.texture_seed``; one tile,
+    repeated, for a tiled surface; none for plain ones)."""
     spec, room = scene.spec, scene.spec.room
     textures: dict[str, np.ndarray] = {}
+    plain: dict[str, tuple[float, float, float]] = {}
+    repeats: dict[str, tuple[float, float]] = {}
     for i, (name, (_, u, v)) in enumerate(room_surfaces(scene).items()):
-        w, h = _texture_size(2 * np.linalg.norm(u), 2 * np.linalg.norm(v), room.texels_per_unit, room.max_texture)
-        textures[name] = poster(w, h, seed=spec.texture_seed * 1000 + i, style=room.style)
+        finish = room.finish(name)
+        extent_u, extent_v = 2 * float(np.linalg.norm(u)), 2 * float(np.linalg.norm(v))
+        if finish.kind == "plain":
+            plain[name] = finish.colour
+        elif finish.kind == "tiles":
+            texels = max(room.texels_per_unit, MIN_GROUT_TEXELS / finish.grout_width)
+            size = min(room.max_texture, int(round(finish.tile_size * texels)))
+            textures[name] = tile(size, finish.grout_width / finish.tile_size * size, finish.colour,
+                                  finish.grout_colour)
+            repeats[name] = (extent_u / finish.tile_size, extent_v / finish.tile_size)
+        else:
+            w, h = _texture_size(extent_u, extent_v, room.texels_per_unit, room.max_texture)
+            textures[name] = poster(w, h, seed=spec.texture_seed * 1000 + i, style=room.style)
     for p in scene.props:
+        if p.colour is not None:
+            plain[p.name] = p.colour
+            continue
         eu, ev = _prop_uv_extent(p)
         w, h = _texture_size(eu, ev, room.prop_texels_per_unit, room.max_texture // 2)
         textures[p.name] = poster(w, h, seed=p.texture_seed, style=room.style)
@@ -106,7 +136,7 @@ def make_assets(scene: ResolvedScene, object_ply: Path | None) -> SceneAssets:
     if albedo.texture:
         w, h = albedo.texture_size
         textures[OBJECT_ID] = poster(w, h, seed=spec.texture_seed * 1000 + 999, style=albedo.style)
-    return SceneAssets(textures, object_ply)
+    return SceneAssets(textures, object_ply, plain, repeats)
 
 
 def _prop_uv_extent(p: ResolvedProp) -> tuple[float, float]:
@@ -151,9 +181,12 @@ def _yaw(deg: float) -> np.ndarray:
 # -------------------------------------------------------------------------------------------------- scene
 
 
-def _diffuse(tex: dict[str, Any] | float) -> dict[str, Any]:
+def _diffuse(tex: dict[str, Any] | float | tuple[float, float, float]) -> dict[str, Any]:
+    """A diffuse BSDF: grey ``float``, linear RGB ``tuple``, or a texture ``dict``."""
     if isinstance(tex, float):
         return {"type": "diffuse", "reflectance": {"type": "rgb", "value": [tex, tex, tex]}}
+    if isinstance(tex, tuple):
+        return {"type": "diffuse", "reflectance": {"type": "rgb", "value": [float(c) for c in tex]}}
     return {"type": "diffuse", "reflectance": tex}
 
 
@@ -232,10 +265,10 @@ def scene_dict(scene: ResolvedScene, assets: SceneAssets, variant: Variant, max_
     if variant != "environment":
         d[OBJECT_ID] = object_shape(scene, assets, variant)
     for name, (centre, u, v) in room_surfaces(scene).items():
-        material = _diffuse(0.0) if geometry_only else _diffuse(assets.bitmap(name))
+        material = _diffuse(0.0) if geometry_only else assets.material(name)
         d[name] = {"type": "rectangle", "to_world": rectangle_transform(centre, u, v), "bsdf": material}
     for p in scene.props:
-        material = _diffuse(0.0) if geometry_only else _diffuse(assets.bitmap(p.name))
+        material = _diffuse(0.0) if geometry_only else assets.material(p.name)
         d.update(prop_shapes(p, material))
     for light in scene.lights:
         u, v = rectangle_frame(np.array(light.normal))

@@ -3,12 +3,14 @@
 Every mesh is a :class:`TriMesh`: float64 ``vertices (V, 3)``, int32 ``faces (F, 3)`` (counter-clockwise
 seen from outside, so normals point out), unit ``normals (V, 3)`` and ``uv (V, 2)`` in [0, 1]. Parametric
 surfaces are built on a (u, v) grid with the seam column duplicated, so the UV map has no wrap-around
-triangles; normals are analytic (torus) or averaged over the seam duplicates (blob), so shading is smooth
-across the seam.
+triangles; normals are analytic (torus) or averaged over the seam duplicates (blob, surfaces of revolution),
+so shading is smooth across the seam. A mug is two meshes in one (:func:`merge`): they interpenetrate, which
+a renderer does not mind, but it is not a watertight solid.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -130,6 +132,104 @@ def blob(centres, amplitudes, sharpness, n_lon: int = 160, n_lat: int = 80) -> T
     mesh = radial_surface(lambda d: bump_radius(d, centres, amplitudes, sharpness), n_lon, n_lat)
     r = mesh.bounding_radius
     return TriMesh(mesh.vertices / r, mesh.faces, mesh.normals, mesh.uv)
+
+
+def smooth_profile(radii) -> Callable[[np.ndarray], np.ndarray]:
+    """``r(s)`` for ``s`` in [0, 1] (bottom to top) through ``radii`` at evenly spaced ``s``: a monotone cubic
+    (PCHIP), so it never overshoots below the smallest radius (a waist stays a waist, radii stay positive)."""
+    from scipy.interpolate import PchipInterpolator
+
+    radii = np.asarray(radii, dtype=np.float64)
+    if len(radii) < 2 or np.any(radii <= 0):
+        raise ValueError(f"smooth_profile: need >= 2 positive radii, got {radii.tolist()}")
+    return PchipInterpolator(np.linspace(0.0, 1.0, len(radii)), radii)
+
+
+def revolution(radius_fn: Callable[[np.ndarray], np.ndarray], height: float, squareness: float = 8.0,
+               n_around: int = 160, n_profile: int = 120) -> TriMesh:
+    """A closed surface of revolution about z, ``height`` tall and centred at the origin: the side wall has radius
+    ``radius_fn(s)`` at ``s = (z + height / 2) / height``, closed at the bottom and top like a superellipse
+    ``|x|^p + |y|^p = 1`` (``p = squareness``) stretched to the profile,
+
+        (x, y) = (sin t, cos t) / (|sin t|^p + |cos t|^p)^(1 / p),   z = height / 2 * y,   r = radius_fn(s) x,
+
+    ``t`` in [0, pi] from the top down: ``squareness`` 2 rounds the ends like an ellipsoid, 8 or more gives
+    nearly flat caps with rounded rims (a vase, a mug). UV: u = angle about z / 2 pi, v = t / pi (0 at the top).
+    """
+    if height <= 0 or squareness < 2:
+        raise ValueError(f"revolution: need height > 0 and squareness >= 2, got {height}, {squareness}")
+    def profile(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        sin, cos = np.sin(t), np.cos(t)
+        sin[(t == 0) | (t == np.pi)] = 0.0  # exact poles
+        norm = (np.abs(sin) ** squareness + np.abs(cos) ** squareness) ** (1 / squareness)
+        z = height / 2 * cos / norm
+        return np.asarray(radius_fn((z + height / 2) / height), dtype=np.float64) * sin / norm, z
+
+    # Uniform t spaces the rows by angle, leaving a tall side wall few of them: place them evenly in arc length
+    # plus turning angle instead (a waist and the rims both get rows).
+    dense = np.linspace(0.0, np.pi, PROFILE_OVERSAMPLING * n_profile + 1)
+    r, z = profile(dense)
+    step = np.hypot(np.diff(r), np.diff(z))
+    turn = np.abs(np.diff(np.unwrap(np.arctan2(np.diff(z), np.diff(r)))))
+    measure = (np.concatenate([[0.0], np.cumsum(step)]) / step.sum()
+               + np.concatenate([[0.0, 0.0], np.cumsum(turn)]) / max(turn.sum(), 1e-12))
+    t = np.interp(np.linspace(0.0, measure[-1], n_profile + 1), measure, dense)
+    t[[0, -1]] = 0.0, np.pi
+    r, z = profile(t)
+    u = np.linspace(0.0, 1.0, n_around + 1)
+    rr, uu = np.meshgrid(r, u, indexing="ij")
+    zz, _ = np.meshgrid(z, u, indexing="ij")
+    vv, _ = np.meshgrid(t / np.pi, u, indexing="ij")
+    phi = uu * 2 * np.pi
+    verts = np.stack([rr * np.cos(phi), rr * np.sin(phi), zz], -1).reshape(-1, 3)
+    # rows from the top down, u eastwards: the same orientation as radial_surface, (a, c, b) faces outward
+    mesh = TriMesh(verts, _grid_faces(n_around, n_profile), np.zeros_like(verts),
+                   np.stack([uu.ravel(), vv.ravel()], -1))
+    mesh = _drop_degenerate(mesh)
+    mesh.normals = _vertex_normals(mesh.vertices, mesh.faces)
+    return mesh
+
+
+def merge(parts: list[tuple[TriMesh, tuple[float, float]]]) -> TriMesh:
+    """One mesh of several (they may interpenetrate: a renderer only sees the outermost surface). Each part's
+    UV v range [0, 1] is squeezed into its ``(v0, v1)`` band, so one texture covers all of them."""
+    vertices, faces, normals, uv = [], [], [], []
+    offset = 0
+    for mesh, (v0, v1) in parts:
+        vertices.append(mesh.vertices)
+        faces.append(mesh.faces + offset)
+        normals.append(mesh.normals)
+        uv.append(np.stack([mesh.uv[:, 0], v0 + (v1 - v0) * mesh.uv[:, 1]], -1))
+        offset += len(mesh.vertices)
+    return TriMesh(np.concatenate(vertices), np.concatenate(faces).astype(np.int32), np.concatenate(normals),
+                   np.concatenate(uv))
+
+
+# Dense samples per profile row, from which the rows are placed (see revolution).
+PROFILE_OVERSAMPLING = 64
+
+
+# The handle ring's centre lies this fraction of its centre-line radius outside the body's wall, so about
+# three fifths of the ring stand out and both of its ends are buried in the body.
+HANDLE_OUTSET = 0.3
+# UV band of the mug's body; the handle takes the rest of v.
+MUG_BODY_V = 0.8
+
+
+def mug(body: TriMesh, handle_major: float, handle_minor: float, handle_z: float, n_major: int = 96,
+        n_minor: int = 24) -> TriMesh:
+    """A body of revolution about z with a torus handle on its +x side (the ring in the xz plane at height
+    ``handle_z``), merged into one mesh and shifted so its bounding box is centred at the origin."""
+    near = np.abs(body.vertices[:, 2] - handle_z) <= handle_minor
+    if not near.any():
+        raise ValueError(f"mug: the handle height {handle_z} is outside the body")
+    wall = float(np.hypot(body.vertices[near, 0], body.vertices[near, 1]).max())
+    quarter_turn_x = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])
+    handle = torus(handle_major, handle_minor, n_major, n_minor).transformed(quarter_turn_x)
+    handle.vertices = handle.vertices + [wall + HANDLE_OUTSET * handle_major, 0.0, handle_z]
+    mesh = merge([(body, (0.0, MUG_BODY_V)), (handle, (MUG_BODY_V, 1.0))])
+    mesh.vertices = mesh.vertices - (mesh.vertices.min(0) + mesh.vertices.max(0)) / 2
+    return mesh
 
 
 def convexity(mesh: TriMesh) -> float:

@@ -36,6 +36,11 @@ The radiance images (linear, diffuse, specular) are sensor-plane images: blurred
 normals, albedo) is per pixel. diffuse + specular = linear holds on interior pixels (coverage 1, at least
 3 sigma of the blur from the silhouette); on silhouette pixels each lobe render also contains the room's share
 of the pixel (see ``decomposition_residual``).
+
+``SynthOptions.truth = "front_end"`` (for benchmarking poses and masks on many scenes) writes only the photos,
+``capture.yaml``, ``cameras.json``, ``scene.json``, ``manifest.json``, ``object.ply``, ``object_albedo.png``,
+``masks/`` and ``coverage/``: no linear, lobe, albedo, normal or depth images and no environment views, and
+only the full render and the coverage pass are rendered (``scene.json: truth`` says which).
 """
 
 from __future__ import annotations
@@ -64,6 +69,9 @@ from .scenes import ResolvedScene, SceneSpec, get_scene, resolve
 log = logging.getLogger("orca.synth")
 
 PhotoFormat = Literal["dng", "jpg", "both"]
+Truth = Literal["full", "front_end"]
+# What a front_end capture's ground_truth/ holds besides cameras.json, scene.json, object.ply (LAYOUT keys).
+FRONT_END_TRUTH = ("masks", "coverage")
 
 # Shutter speeds a camera offers (1/3-stop series), in seconds.
 SHUTTER_SPEEDS_S: tuple[float, ...] = tuple(1.0 / d for d in (
@@ -111,6 +119,8 @@ class SynthOptions:
     # PSF, sigma in pixels). Without it a Bayer mosaic of a perfectly sharp render loses information no
     # demosaicing recovers at sharp texture edges (27 dB on the demo against 34 dB at 0.7 px).
     optics_blur_px: float = 0.7
+    # full: every ground truth above; front_end: photos, cameras, scene.json, mesh, masks and coverage only
+    truth: Truth = "full"
 
     def validate(self) -> None:
         problems = []
@@ -126,6 +136,8 @@ class SynthOptions:
             problems.append(f"env_size must be >= 8, got {self.env_size}")
         if self.format not in ("dng", "jpg", "both"):
             problems.append(f"format must be dng, jpg or both, got {self.format!r}")
+        if self.truth not in ("full", "front_end"):
+            problems.append(f"truth must be full or front_end, got {self.truth!r}")
         if problems:
             raise InputError("invalid synth options: " + "; ".join(problems))
 
@@ -164,8 +176,8 @@ class ViewTruth:
     depth: np.ndarray  # (H, W) z-depth of the object, inf elsewhere
     normals: np.ndarray  # (H, W, 3)
     albedo: np.ndarray  # (H, W, 3)
-    diffuse: np.ndarray  # (H, W, 3)
-    specular: np.ndarray  # (H, W, 3)
+    diffuse: np.ndarray | None  # (H, W, 3); None when the lobes are not rendered (front_end)
+    specular: np.ndarray | None  # (H, W, 3)
     light_hit: np.ndarray  # (H, W) bool: pixel-centre ray hits a light
     interior: np.ndarray  # (H, W) bool: object pixels whose whole optics-blur footprint is object (identity holds)
 
@@ -176,10 +188,12 @@ class _Renderer:
     def __init__(self, scene: ResolvedScene, assets: build.SceneAssets, options: SynthOptions):
         self.scene, self.options = scene, options
         self.full, self.index = build.load_scene(scene, assets, "full")
-        self.diffuse, _ = build.load_scene(scene, assets, "diffuse")
-        self.specular, _ = build.load_scene(scene, assets, "specular")
         self.coverage, _ = build.load_scene(scene, assets, "coverage")
-        self.env, self.env_index = build.load_scene(scene, assets, "environment")
+        if options.truth == "full":
+            self.diffuse, _ = build.load_scene(scene, assets, "diffuse")
+            self.specular, _ = build.load_scene(scene, assets, "specular")
+            self.env, self.env_index = build.load_scene(scene, assets, "environment")
+        self.variants = 5 if options.truth == "full" else 2
         self.object_index = self.index[build.OBJECT_ID]
         self.geometry_aov = build.aov_integrator("pp:position,nn:sh_normal,si:shape_index,al:albedo")
         self.coverage_aov = build.aov_integrator("al:albedo")
@@ -208,6 +222,9 @@ class _Renderer:
 
         linear = _repair_non_finite(build.render(self.full, self._sensor(v, o.spp, o.sampler), seed=seed),
                                     f"{v.name} (full render)")
+        if o.truth == "front_end":
+            return ViewTruth(optics_blur(linear, o.optics_blur_px), cov.astype(np.float32), object_hit, depth,
+                             normals, albedo, None, None, light_hit, interior_mask(cov, o.optics_blur_px))
         diffuse = np.zeros_like(linear)
         specular = np.zeros_like(linear)
         crop = _crop_of(cov > 0)
@@ -352,6 +369,8 @@ def decomposition_residual(truth: ViewTruth) -> dict[str, float]:
     noise dominates (the three renders share sampler seeds, but their paths diverge at the first bounce).
     """
     m = truth.interior
+    if truth.diffuse is None or truth.specular is None:
+        raise ValueError("decomposition_residual needs the diffuse and specular renders (truth='full')")
     if not m.any():
         return {"pixels": 0, "relative_mean": 0.0, "relative_rmse": 0.0}
     full, parts = truth.linear[m].astype(np.float64), (truth.diffuse[m] + truth.specular[m]).astype(np.float64)
@@ -441,7 +460,8 @@ def render_capture(scene: str | SceneSpec, out_dir: str | Path, options: SynthOp
     names = [photo_stem(i) for i in range(options.views)]
     views = capture_views(spec.rig, options.views, options.width, options.height,
                           np.random.default_rng([options.seed, 1]), names)
-    env_views = environment_views(resolved, options.env_size)
+    full_truth = options.truth == "full"
+    env_views = environment_views(resolved, options.env_size) if full_truth else []
     exposure_rng = np.random.default_rng([options.seed, 2])
     reference = Exposure(exp.shutter_s, exp.iso, exp.f_number)
     start_time = dt.datetime.fromisoformat(exp.start_time)
@@ -450,16 +470,17 @@ def render_capture(scene: str | SceneSpec, out_dir: str | Path, options: SynthOp
 
     with atomic_dir(out_dir, "synth", manifest=f"{GT}/{MANIFEST}") as tmp:
         gt = tmp / GT
-        for key in ("linear", "diffuse", "specular", "albedo", "normals", "depth", "masks", "coverage"):
+        per_view = _PER_VIEW_TRUTH if full_truth else FRONT_END_TRUTH
+        for key in per_view:
             (tmp / LAYOUT[key]).mkdir(parents=True)
-        for sub in ("rgb", "depth"):
+        for sub in ("rgb", "depth") if full_truth else ():
             (tmp / LAYOUT["environment"] / sub).mkdir(parents=True)
         mesh_path = geometry.write_ply(tmp / LAYOUT["mesh"], resolved.mesh)
         t0 = time.time()
         assets = build.make_assets(resolved, None if spec.object.kind == "sphere" else mesh_path)
         renderer = _Renderer(resolved, assets, options)
         log.info("scene %r ready in %.1f s (textures and %d Mitsuba scene variants)", spec.name,
-                 time.time() - t0, 5)
+                 time.time() - t0, renderer.variants)
         if spec.object.albedo.texture:
             write_png(gt / "object_albedo.png", to_srgb8(assets.textures[build.OBJECT_ID]))
 
@@ -499,10 +520,12 @@ def render_capture(scene: str | SceneSpec, out_dir: str | Path, options: SynthOp
                                 focal_35)
                 record.update(info or {})
                 photos.append(record)
-                _write_view_truth(tmp, v.name, truth)
-                residuals.append(decomposition_residual(truth))
+                _write_view_truth(tmp, v.name, truth, per_view)
+                if full_truth:
+                    residuals.append(decomposition_residual(truth))
                 view_seconds.append(time.time() - tv)
-                log.debug("%s: %.1f s, decomposition residual %s", v.name, view_seconds[-1], residuals[-1])
+                log.debug("%s: %.1f s, decomposition residual %s", v.name, view_seconds[-1],
+                          residuals[-1] if residuals else None)
                 bar.advance(task)
 
             env_seconds = []
@@ -516,8 +539,9 @@ def render_capture(scene: str | SceneSpec, out_dir: str | Path, options: SynthOp
 
         save_cameras(tmp / LAYOUT["cameras"], CameraSet(
             frame=Frame(), cameras=[v.camera(f"../{p['image']}") for v, p in zip(views, photos)]))
-        save_cameras(tmp / LAYOUT["environment"] / CAMERAS_JSON, CameraSet(
-            frame=Frame(), cameras=[v.camera(f"rgb/{v.name}.exr") for v in env_views]))
+        if full_truth:
+            save_cameras(tmp / LAYOUT["environment"] / CAMERAS_JSON, CameraSet(
+                frame=Frame(), cameras=[v.camera(f"rgb/{v.name}.exr") for v in env_views]))
         factor = decoded_scale(gain, reference, SensorModel())
         # What a person who knows the material would write: the coat's index of refraction (Fresnel).
         (tmp / CAPTURE_YAML).write_text(
@@ -527,7 +551,8 @@ def render_capture(scene: str | SceneSpec, out_dir: str | Path, options: SynthOp
         write_json(tmp / LAYOUT["scene"], _scene_json(
             resolved, options, photos, residuals, factor, gain, env_views, mi.__version__))
         timing = {"views": len(views), "seconds_per_view": float(np.mean(view_seconds)),
-                  "environment_views": len(env_views), "seconds_per_environment_view": float(np.mean(env_seconds)),
+                  "environment_views": len(env_views),
+                  "seconds_per_environment_view": float(np.mean(env_seconds)) if env_seconds else 0.0,
                   "total_seconds": round(time.time() - started, 2)}
         # the capture record of the photos as they will lie in out_dir: evaluate checks a model against its own
         capture = {**capture_record(tmp, [tmp / p["image"] for p in photos]), "folder": str(out_dir.resolve())}
@@ -536,8 +561,9 @@ def render_capture(scene: str | SceneSpec, out_dir: str | Path, options: SynthOp
         log.info("rendered %d views (%.1f s each) and %d environment views (%.1f s each) in %.0f s -> %s",
                  len(views), timing["seconds_per_view"], len(env_views), timing["seconds_per_environment_view"],
                  time.time() - started, out_dir)
-        worst = max(r["relative_mean"] for r in residuals)
-        log.info("diffuse + specular vs full on object pixels: worst relative mean residual %.2e", worst)
+        if residuals:
+            worst = max(r["relative_mean"] for r in residuals)
+            log.info("diffuse + specular vs full on object pixels: worst relative mean residual %.2e", worst)
     return out_dir
 
 
@@ -556,15 +582,24 @@ def _simulated_info(exposure, gain: float) -> dict[str, Any]:
             "decoded_from_linear": (raw_scale * decoded_from_linear(sensor)).tolist()}
 
 
-def _write_view_truth(root: Path, stem: str, t: ViewTruth) -> None:
-    write_exr(root / LAYOUT["linear"] / f"{stem}.exr", t.linear, half=True)
-    write_exr(root / LAYOUT["diffuse"] / f"{stem}.exr", t.diffuse, half=True)
-    write_exr(root / LAYOUT["specular"] / f"{stem}.exr", t.specular, half=True)
-    write_exr(root / LAYOUT["albedo"] / f"{stem}.exr", t.albedo, half=True)
-    write_exr(root / LAYOUT["normals"] / f"{stem}.exr", t.normals, half=True)
-    write_exr(root / LAYOUT["depth"] / f"{stem}.exr", t.depth)
-    write_png(root / LAYOUT["masks"] / f"{stem}.png", np.where(t.coverage >= 0.5, 255, 0).astype(np.uint8))
-    write_png(root / LAYOUT["coverage"] / f"{stem}.png", np.round(t.coverage * 255).astype(np.uint8))
+# Per-view ground-truth folders of a full capture (LAYOUT keys), in writing order.
+_PER_VIEW_TRUTH = ("linear", "diffuse", "specular", "albedo", "normals", "depth", "masks", "coverage")
+
+
+def _write_view_truth(root: Path, stem: str, t: ViewTruth, kinds: tuple[str, ...] = _PER_VIEW_TRUTH) -> None:
+    """Write the per-view ground truth named in ``kinds`` (LAYOUT keys)."""
+    half_exr = {"linear": t.linear, "diffuse": t.diffuse, "specular": t.specular, "albedo": t.albedo,
+                "normals": t.normals}
+    for kind in kinds:
+        folder = root / LAYOUT[kind]
+        if kind in half_exr:
+            write_exr(folder / f"{stem}.exr", half_exr[kind], half=True)
+        elif kind == "depth":
+            write_exr(folder / f"{stem}.exr", t.depth)
+        elif kind == "masks":
+            write_png(folder / f"{stem}.png", np.where(t.coverage >= 0.5, 255, 0).astype(np.uint8))
+        elif kind == "coverage":
+            write_png(folder / f"{stem}.png", np.round(t.coverage * 255).astype(np.uint8))
 
 
 def _scene_json(scene: ResolvedScene, options: SynthOptions, photos: list[dict], residuals: list[dict],
@@ -572,8 +607,10 @@ def _scene_json(scene: ResolvedScene, options: SynthOptions, photos: list[dict],
     spec, obj = scene.spec, scene.spec.object
     rel = [r["relative_mean"] for r in residuals]
     rmse = [r["relative_rmse"] for r in residuals]
+    room = spec.room
     return {
         "scene": spec.name,
+        "truth": options.truth,
         "world_frame": "z up; object bounding sphere centred at the origin (object.centre, object.radius); "
                        "cameras OpenCV (x right, y down, z forward), camera-to-world",
         "object": {
@@ -586,7 +623,9 @@ def _scene_json(scene: ResolvedScene, options: SynthOptions, photos: list[dict],
                          "/ 2 pi (atan2(y, x)), v = polar angle from +z / pi",
         },
         "floor_z": scene.floor_z,
-        "room": {"min": scene.room_min.tolist(), "max": scene.room_max.tolist()},
+        "lift": spec.lift,
+        "room": {"min": scene.room_min.tolist(), "max": scene.room_max.tolist(),
+                 "finish": {s: asdict(room.finish(s)) for s in ("walls", "floor", "ceiling")}},
         "props": [p.to_json() for p in scene.props],
         "lights": [{"name": lt.name, "type": "rectangle area light, one-sided", "centre": list(lt.centre),
                     "size": list(lt.size), "normal": list(lt.normal), "radiance": list(lt.radiance)}
@@ -625,19 +664,19 @@ def _scene_json(scene: ResolvedScene, options: SynthOptions, photos: list[dict],
             "coverage": "8-bit occlusion-aware object coverage (255 = all samples hit the object); the "
                         "diffuse + specular = linear identity is exact (up to noise) where it is 255",
         },
-        "decomposition_residual": {
+        "decomposition_residual": None if not residuals else {
             "relative_mean": {"max": max(rel), "mean": float(np.mean(rel))},
             "relative_rmse": {"max": max(rmse), "mean": float(np.mean(rmse))},
             "definition": "over interior object pixels (coverage 255, 3 sigma of optics blur inside the "
                           "silhouette): |mean(linear - diffuse - specular)| / "
                           "mean(linear), and the per-pixel RMS of the same difference / mean(linear)",
         },
-        "environment": {
+        "environment": None if not env_views else {
             "cameras": "environment/cameras.json",
             "views": [v.name for v in env_views],
             "object_removed": True,
             "note": "rendered without the object (so also without its shadow and interreflections); cube_* from "
-                    "the object centre, parallax_* translated inside the bounding sphere, looking at prop "
-                    f"{spec.env.parallax_prop!r}",
+                    "the object centre, parallax_* translated inside the bounding sphere, looking at "
+                    + (f"prop {spec.env.parallax_prop!r}" if spec.env.parallax_prop else "+x"),
         },
     }

@@ -2,10 +2,12 @@
 
 World frame (the ground-truth frame): z up, the object's bounding sphere is centred at the origin with the
 radius in :attr:`ObjectSpec.radius` (1 for every preset), the object rests on the floor (``floor_z`` is the
-object's lowest point). Props stand on the floor (or on another prop) one to three object radii from the
-object's surface, so the reflections show close-by things at several depths, and the walls further out.
+object's lowest point) or, with :attr:`SceneSpec.lift`, that far above it (on a table prop, or floating).
+Props stand on the floor (or on another prop) one to three object radii from the object's surface, so the
+reflections show close-by things at several depths, and the walls further out.
 
-A preset is a :class:`SceneSpec`; :data:`SCENES` maps names to them. Only geometry is resolved here
+A preset is a :class:`SceneSpec`; :data:`SCENES` maps names to them; ``random-<seed>`` and ``tiles-<seed>``
+name scenes of the randomized family (:mod:`pipeline.synth.family`). Only geometry is resolved here
 (:func:`resolve`), nothing imports Mitsuba.
 """
 
@@ -44,11 +46,14 @@ class AlbedoSpec:
                                      max_scale=0.6, glyph_weight=0.0, palette=OBJECT_PALETTE)
 
 
+ObjectKind = Literal["sphere", "torus", "blob", "vase", "mug"]
+
+
 @dataclass(frozen=True)
 class ObjectSpec:
     """The glossy object: a smooth (or slightly rough) dielectric coat over a diffuse base (Mitsuba plastic)."""
 
-    kind: Literal["sphere", "torus", "blob"]
+    kind: ObjectKind
     radius: float = 1.0  # bounding-sphere radius, centred at the origin
     albedo: AlbedoSpec = AlbedoSpec()
     int_ior: float = 1.9  # coat IOR (a glaze / lacquer): ~10 % reflected at normal incidence, more at grazing
@@ -62,6 +67,17 @@ class ObjectSpec:
     bump_amplitudes: tuple[float, ...] = ()
     bump_sharpness: tuple[float, ...] = ()
     mesh_resolution: tuple[int, int] = (160, 80)  # grid (around, across) of parametric meshes
+    # vase / mug body: a surface of revolution about z (see geometry.revolution): radii at evenly spaced
+    # heights from the bottom up (a smaller middle one makes a waist), the height in the same units, and how
+    # square the bottom and top edges are (2: an ellipsoid-like closing, large: flat caps, sharp rims)
+    profile_radii: tuple[float, ...] = ()
+    profile_height: float = 2.0
+    profile_squareness: float = 8.0
+    # mug handle: a torus in the xz plane through the body's wall; radii and centre height as fractions of
+    # the body's height (centre height from the bottom)
+    handle_major: float = 0.28
+    handle_minor: float = 0.06
+    handle_height: float = 0.55
 
 
 @dataclass(frozen=True)
@@ -74,6 +90,21 @@ class PropSpec:
     yaw_deg: float = 0.0  # rotation about z (boxes)
     lift: float = 0.0  # extra height of the bottom above the floor (e.g. stacked on another prop)
     name: str = ""
+    colour: Vec3 | None = None  # uniform linear reflectance (a plain table, a painted box); None: a poster
+
+
+@dataclass(frozen=True)
+class SurfaceFinish:
+    """How a room surface looks: a poster (:attr:`RoomSpec.style`), plain paint of one ``colour``, or a regular
+    grid of identical plain ``colour`` tiles of side ``tile_size`` with ``grout_width`` lines of
+    ``grout_colour`` between them (a repetitive texture: every tile corner looks the same to SIFT).
+    Colours are linear reflectances."""
+
+    kind: Literal["poster", "plain", "tiles"] = "poster"
+    colour: Vec3 = (0.6, 0.6, 0.6)
+    tile_size: float = 0.3  # world units
+    grout_width: float = 0.015  # world units
+    grout_colour: Vec3 = (0.25, 0.25, 0.25)
 
 
 @dataclass(frozen=True)
@@ -83,10 +114,17 @@ class RoomSpec:
     half_x: float = 8.0
     half_y: float = 8.0
     height: float = 6.5
-    texels_per_unit: float = 96.0  # wall/floor poster resolution
+    texels_per_unit: float = 96.0  # wall/floor poster resolution (and tiles' texels per tile side / tile_size)
     max_texture: int = 2048
     style: PosterStyle = PosterStyle()
     prop_texels_per_unit: float = 256.0
+    walls: SurfaceFinish = SurfaceFinish()
+    floor: SurfaceFinish = SurfaceFinish()
+    ceiling: SurfaceFinish = SurfaceFinish()
+
+    def finish(self, surface: str) -> SurfaceFinish:
+        """The finish of a surface named as in :func:`pipeline.synth.build.room_surfaces`."""
+        return self.floor if surface == "floor" else self.ceiling if surface == "ceiling" else self.walls
 
 
 @dataclass(frozen=True)
@@ -112,6 +150,12 @@ class RigSpec:
     target_jitter: float = 0.08  # look-at point jitter (world units), so the object is not always dead centre
     roll_jitter_deg: float = 2.0
     sensor_width_mm: float = 6.4  # for EXIF focal length (a phone's main camera)
+    # interleaved: photo i on ring i % rings, all rings at once; sequential: one full ring after the other
+    # (a walk around at one height, then at the next), each starting at a random azimuth
+    ring_order: Literal["interleaved", "sequential"] = "interleaved"
+    spacing_jitter: float = 0.0  # relative spread of the azimuth steps between photos (uneven walking pace)
+    position_jitter: float = 0.0  # hand-held shake of the camera centre (world units, per axis, uniform)
+    dropped: int = 0  # planned path positions with no photo (missing photos leave gaps in the path)
 
 
 @dataclass(frozen=True)
@@ -119,7 +163,7 @@ class EnvViewSpec:
     """Environment ground truth: cube views from the object centre, and translated views behind a prop."""
 
     cube_fov_deg: float = 90.0
-    parallax_prop: str = "occluder"  # name of the prop to look at
+    parallax_prop: str | None = "occluder"  # name of the prop to look at; None: along +x
     parallax_offsets: tuple[float, ...] = (-0.75, 0.0, 0.75)  # sideways shifts, fractions of object radius
     parallax_fov_deg: float = 70.0
 
@@ -137,6 +181,7 @@ class SceneSpec:
     # sample), which is what a reflection of a lit prop needs; 4 looks the same here at twice the cost.
     max_depth: int = 3
     texture_seed: int = 0  # textures depend only on this (and the surface), not on the render seed
+    lift: float = 0.0  # height of the object's lowest point above the floor (on a table prop, or floating)
 
 
 # --------------------------------------------------------------------------------------------- presets
@@ -191,13 +236,20 @@ SCENES: dict[str, SceneSpec] = {
 
 
 def get_scene(name_or_spec: str | SceneSpec) -> SceneSpec:
-    """A preset by name (case-insensitive), or the spec itself."""
+    """A preset by name (case-insensitive), a family scene by name (``random-<seed>``, ``tiles-<seed>``, see
+    :func:`pipeline.synth.family.scene_by_name`), or the spec itself."""
     if isinstance(name_or_spec, SceneSpec):
         return name_or_spec
     key = str(name_or_spec).lower()
-    if key not in SCENES:
-        raise InputError(f"unknown scene {name_or_spec!r}; choose one of: {', '.join(SCENES)}")
-    return SCENES[key]
+    if key in SCENES:
+        return SCENES[key]
+    from .family import scene_by_name  # the family builds on this module
+
+    spec = scene_by_name(key)
+    if spec is None:
+        raise InputError(f"unknown scene {name_or_spec!r}; choose one of: {', '.join(SCENES)}, "
+                         "random-<seed>, tiles-<seed> (seed: a non-negative integer)")
+    return spec
 
 
 # ------------------------------------------------------------------------------------- resolved geometry
@@ -213,10 +265,14 @@ class ResolvedProp:
     size: np.ndarray  # (3,)
     yaw_deg: float
     texture_seed: int
+    colour: Vec3 | None = None  # plain linear reflectance, or None for a poster texture
 
     def to_json(self) -> dict:
-        return {"name": self.name, "kind": self.kind, "centre": self.centre.tolist(), "size": self.size.tolist(),
-                "size_meaning": _SIZE_MEANING[self.kind], "yaw_deg": self.yaw_deg}
+        d = {"name": self.name, "kind": self.kind, "centre": self.centre.tolist(), "size": self.size.tolist(),
+             "size_meaning": _SIZE_MEANING[self.kind], "yaw_deg": self.yaw_deg}
+        if self.colour is not None:
+            d["colour"] = list(self.colour)
+        return d
 
 
 _SIZE_MEANING = {
@@ -270,6 +326,17 @@ def object_mesh(obj: ObjectSpec) -> geometry.TriMesh:
         if not (len(obj.bump_centres) == len(obj.bump_amplitudes) == len(obj.bump_sharpness) > 0):
             raise ValueError("blob: bump_centres, bump_amplitudes and bump_sharpness must be equally long, >= 1")
         mesh = geometry.blob(obj.bump_centres, obj.bump_amplitudes, obj.bump_sharpness, around, across)
+    elif obj.kind in ("vase", "mug"):
+        if len(obj.profile_radii) < 2:
+            raise ValueError(f"{obj.kind}: profile_radii needs at least 2 radii")
+        body = geometry.revolution(geometry.smooth_profile(obj.profile_radii), obj.profile_height,
+                                   obj.profile_squareness, around, across)
+        if obj.kind == "vase":
+            mesh = body
+        else:
+            h = obj.profile_height
+            mesh = geometry.mug(body, h * obj.handle_major, h * obj.handle_minor, h * (obj.handle_height - 0.5),
+                                around, max(16, across // 4))
     else:
         raise ValueError(f"unknown object kind {obj.kind!r}")
     return mesh.transformed(rotation_xyz(obj.tilt_deg), obj.radius / mesh.bounding_radius)
@@ -278,14 +345,14 @@ def object_mesh(obj: ObjectSpec) -> geometry.TriMesh:
 def resolve(spec: SceneSpec) -> ResolvedScene:
     """Build the object mesh and place the floor, props and lights in the world frame."""
     mesh = object_mesh(spec.object)
-    floor_z = float(mesh.vertices[:, 2].min())
+    floor_z = float(mesh.vertices[:, 2].min()) - spec.lift
     props: list[ResolvedProp] = []
     for i, p in enumerate(spec.props):
         sx, sy, sz = p.size
         height = 2 * sz if p.kind == "box" else (sz if p.kind == "cylinder" else 2 * sz)
         centre = np.array([p.xy[0], p.xy[1], floor_z + p.lift + height / 2])
         props.append(ResolvedProp(p.name or f"prop{i}", p.kind, centre, np.array(p.size, float), p.yaw_deg,
-                                  spec.texture_seed * 1000 + 100 + i))
+                                  spec.texture_seed * 1000 + 100 + i, p.colour))
     lights = [replace(light, centre=(light.centre[0], light.centre[1], light.centre[2] + floor_z))
               for light in spec.lights]
     room = spec.room

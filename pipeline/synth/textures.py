@@ -1,4 +1,4 @@
-"""Procedural poster-like textures: shapes of many sizes in strong, flat colours.
+"""Procedural poster-like textures: shapes of many sizes in strong, flat colours (and plain tiles).
 
 Why posters and not noise: SfM on low-resolution, noisy Monte Carlo renders needs features that survive
 both. Fine random noise averages out to grey at a distance and is drowned by render noise up close (a
@@ -86,6 +86,21 @@ def poster(width: int, height: int, seed: int, style: PosterStyle = PosterStyle(
 
     lo, hi = style.reflectance
     return (lo + (hi - lo) * srgb_to_linear(canvas.astype(np.float32) / 255.0)).astype(np.float32)
+
+
+def tile(size_px: int, grout_px: float, colour, grout_colour) -> np.ndarray:
+    """One ``(size_px, size_px, 3)`` float32 tile of linear ``colour`` framed by half a grout line of
+    ``grout_colour`` on each side, so that repeating it draws a regular grid of identical tiles with grout lines
+    ``grout_px`` texels wide. Texels on a line's edge hold the area-weighted mix (anti-aliased)."""
+    if size_px < 4 or not 0 < grout_px < size_px:
+        raise ValueError(f"tile: need size_px >= 4 and 0 < grout_px < size_px, got {size_px}, {grout_px}")
+    lo = np.arange(size_px, dtype=np.float64)
+    half = grout_px / 2
+    # overlap of texel [i, i + 1] with the grout bands [0, half) and [size - half, size)
+    band = np.clip(half - lo, 0, 1) + np.clip(lo + 1 - (size_px - half), 0, 1)
+    grout = 1 - np.outer(1 - band, 1 - band)  # a texel is grout where either direction's band covers it
+    c, g = np.asarray(colour, np.float64), np.asarray(grout_colour, np.float64)
+    return (c * (1 - grout[..., None]) + g * grout[..., None]).astype(np.float32)
 
 
 def _pt(p: np.ndarray) -> tuple[int, int]:
