@@ -4,9 +4,11 @@
     python bench/blowtorch.py                               # all 67 photos, decode.downscale 2
     python bench/blowtorch.py --limit 16 --downscale 4      # the first 16 photos (~290 degrees of the orbit)
     python bench/blowtorch.py --every 3 --work /tmp/bt_bench --set poses.matcher=sequential
+    python bench/blowtorch.py --known-poses                 # masks alone: the reference cameras, no SfM
 
 Builds a capture folder in the work folder (symlinks to the photos and a capture.yaml with
-``decode: {downscale: N}``; no masks and no known cameras, since both are what is measured), runs
+``decode: {downscale: N}``; no masks and no known cameras, since both are what is measured, unless
+``--known-poses`` links the reference poses_bounds.npy in to measure the masks on their own), runs
 ``orca decode``, ``orca poses`` and ``orca masks`` (the installed CLI beside this Python) one after the other,
 each timed with its peak resident memory, then scores:
 
@@ -40,7 +42,16 @@ import numpy as np
 
 from pipeline.alignment import compare_poses
 from pipeline.cameras import CameraSet
-from pipeline.layout import CAPTURE_YAML, DECODE, MASKS, PHOTO_SUBDIR, POSES, POSES_BOUNDS, USER_MASKS
+from pipeline.layout import (
+    CAPTURE_YAML,
+    DECODE,
+    LLFF_IMAGE_NAMES,
+    MASKS,
+    PHOTO_SUBDIR,
+    POSES,
+    POSES_BOUNDS,
+    USER_MASKS,
+)
 from pipeline.llff import load_poses_bounds
 from pipeline.mask_file import read_mask
 from pipeline.metrics import iou
@@ -64,12 +75,15 @@ def select_photos(dataset: Path = DATASET, start: int = 0, every: int = 1, limit
     return photos[:limit] if limit is not None else photos
 
 
-def build_capture(folder: Path, photos: Sequence[Path], downscale: int) -> Path:
+def build_capture(folder: Path, photos: Sequence[Path], downscale: int, known_poses: Path | None = None) -> Path:
     """A capture folder of symlinks to ``photos`` (in ``images/``) and a capture.yaml setting the decode
-    downscale. ``folder`` must not exist."""
+    downscale; with ``known_poses`` (a dataset folder) also links to its LLFF poses, which the poses stage
+    then uses instead of SfM. ``folder`` must not exist."""
     (folder / PHOTO_SUBDIR).mkdir(parents=True)
     for p in photos:
         (folder / PHOTO_SUBDIR / p.name).symlink_to(p.resolve())
+    for name in (POSES_BOUNDS, LLFF_IMAGE_NAMES) if known_poses is not None else ():
+        (folder / name).symlink_to((known_poses / name).resolve())
     (folder / CAPTURE_YAML).write_text(f"decode:\n  downscale: {downscale}\n", encoding="utf-8")
     return folder
 
@@ -192,7 +206,7 @@ def commit() -> str:
 
 def score(results: Path, photos: Sequence[Path], dataset: Path = DATASET) -> dict[str, Any]:
     """Registered photos, pose agreement and masks IoU of a front-end run in ``results/``."""
-    cameras = load_poses(results / POSES).cameras
+    cameras = load_poses(results / POSES).cameras()
     names = [p.stem for p in photos]
     registered = set(cameras.by_name())
     figures: dict[str, Any] = {"registered": len(registered), "total": len(names),
@@ -234,7 +248,10 @@ def main() -> None:
     parser.add_argument("--work", type=Path, default=None,
                         help="keep the capture and the stages' folders in a new folder here (default: a temporary "
                         "folder, removed)")
-    parser.add_argument("--no-record", action="store_true", help=f"do not append to {RESULTS.relative_to(ROOT)}")
+    parser.add_argument("--known-poses", action="store_true",
+                        help="give the capture the reference poses (no SfM): measures the masks on their own")
+    parser.add_argument("--results", type=Path, default=RESULTS, help="the JSON lines file appended to")
+    parser.add_argument("--no-record", action="store_true", help="append nothing")
     args = parser.parse_args()
 
     photos = select_photos(args.dataset, args.start, args.every, args.limit)
@@ -246,14 +263,16 @@ def main() -> None:
     else:
         work = Path(tempfile.mkdtemp(prefix="orca_blowtorch_"))
     try:
-        capture = build_capture(work / "blowtorch", photos, args.downscale)
+        capture = build_capture(work / "blowtorch", photos, args.downscale,
+                                args.dataset if args.known_poses else None)
         runs = run_front_end(capture, work / "results", args.overrides)
         failed = [r for r in runs.values() if r.returncode]
         figures = {} if failed and failed[0].stage != MASKS else score(work / "results", photos, args.dataset)
         record = {
             "date": time.strftime("%Y-%m-%dT%H:%M:%S"), "machine": machine(), "commit": commit(),
             "settings": {"photos": len(photos), "first": photos[0].name, "start": args.start, "every": args.every,
-                         "limit": args.limit, "downscale": args.downscale, "overrides": args.overrides},
+                         "limit": args.limit, "downscale": args.downscale, "known_poses": args.known_poses,
+                         "overrides": args.overrides},
             "stages": {s: {"seconds": round(r.seconds, 1), "peak_rss_mb": round(r.peak_rss_mb),
                            "returncode": r.returncode} for s, r in runs.items()},
             **{k: v for k, v in figures.items() if k not in ("poses", "masks")},
@@ -267,8 +286,8 @@ def main() -> None:
         if failed:
             print(f"\n{failed[0].stage} failed:\n" + "\n".join(record["failed"]["log_tail"]))
         if not args.no_record:
-            RESULTS.parent.mkdir(exist_ok=True)
-            with open(RESULTS, "a", encoding="utf-8") as f:
+            args.results.parent.mkdir(parents=True, exist_ok=True)
+            with open(args.results, "a", encoding="utf-8") as f:
                 f.write(json.dumps(record) + "\n")
         if args.work is not None:
             print(f"work folder: {work}")

@@ -1,0 +1,41 @@
+"""The front end on real photos of a glossy object: the first 16 blowtorch photos (about 290 degrees of the
+walk-around) decoded at 530x353, through ``orca decode``, ``orca poses`` and ``orca masks`` as
+bench/blowtorch.py runs them, scored against the photographers' COLMAP poses and object masks."""
+
+from __future__ import annotations
+
+import pytest
+from helpers import TESTDATA
+
+from bench.blowtorch import build_capture, run_front_end, score, select_photos
+
+DATASET = TESTDATA / "real" / "blowtorch"
+PHOTOS, DOWNSCALE = 16, 4  # 2120x1415 -> 530x353
+OVERRIDES = ["poses.num_threads=2"]
+# Targets: every photo registered; poses as close to the reference as SfM at this size allows (1 px is about
+# 0.07 degrees); the masks of the issue.
+ROTATION_DEG_MEDIAN, ROTATION_DEG_MAX = 0.5, 2.0
+CENTRE_MEDIAN_FRACTION, CENTRE_MAX_FRACTION = 0.02, 0.05  # of the cameras' mean distance from their centroid
+IOU_MEDIAN, IOU_WORST = 0.95, 0.90
+
+pytestmark = [pytest.mark.slow, pytest.mark.skipif(not DATASET.is_dir(), reason="no blowtorch test data")]
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+    "not reached yet: SfM starts no model on these 16 photos at 530 px (2 of 16 register at 1060 px), and with "
+    "the reference cameras the automatic masks reach IoU median 0.56, worst 0.48 (burner and handle cut off)"))
+def test_blowtorch_subset_registers_and_agrees_with_the_reference(tmp_path):
+    photos = select_photos(DATASET, limit=PHOTOS)
+    capture = build_capture(tmp_path / "blowtorch", photos, DOWNSCALE)
+    runs = run_front_end(capture, tmp_path / "results", OVERRIDES)
+    failed = [r for r in runs.values() if r.returncode]
+    assert not failed, f"{failed[0].stage} failed:\n{failed[0].log[-3000:]}"
+    figures = score(tmp_path / "results", photos, DATASET)
+    print({s: round(r.seconds, 1) for s, r in runs.items()}, figures["poses"] | figures["masks"])
+    assert figures["registered"] == figures["total"] == PHOTOS, figures["unregistered"]
+    poses = figures["poses"]
+    assert poses["rotation_deg_median"] <= ROTATION_DEG_MEDIAN and poses["rotation_deg_max"] <= ROTATION_DEG_MAX
+    assert poses["center_median_fraction"] <= CENTRE_MEDIAN_FRACTION
+    assert poses["center_max_fraction"] <= CENTRE_MAX_FRACTION
+    masks = figures["masks"]
+    assert masks["iou_median"] >= IOU_MEDIAN and masks["iou_worst"] >= IOU_WORST, masks["worst_view"]
