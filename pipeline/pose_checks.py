@@ -193,9 +193,9 @@ def path_jumps(names: Sequence[str], centers: np.ndarray, matches: np.ndarray, r
     limit = ratio * median_step
     if median_step <= 0 or not np.any(alike & (steps > limit)):
         return [], median_step, median_matches
-    keep = consistent_path(centers, alike, limit, median_step)
+    dropped = np.flatnonzero(~consistent_path(centers, alike, limit, median_step))
     suspects = []
-    for run in np.split(np.flatnonzero(~keep), np.flatnonzero(np.diff(np.flatnonzero(~keep)) > 1) + 1):
+    for run in np.split(dropped, np.flatnonzero(np.diff(dropped) > 1) + 1) if len(dropped) else []:
         first, last = int(run[0]), int(run[-1])
         edges = [(i, i + 1) for i in (first - 1, last) if 0 <= i < n - 1]
         jumps = [(i, j) for i, j in edges if alike[i] and steps[i] > limit] or edges
