@@ -14,6 +14,7 @@ file name per line, in the rows' order) naming every row; without it the rows ar
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -98,7 +99,7 @@ def _row_names(path: Path, rows: np.ndarray, photos: Sequence[str]) -> list[str]
                 f"{LLFF_IMAGE_NAMES} the rows are the photos in the sorted order of their file names", path,
                 fix=f"add {LLFF_IMAGE_NAMES} beside it (the file name of every row, one per line, sorted), or put "
                 "exactly the photos the poses were made from in the capture")
-    repeated = sorted({n for n in names if names.count(n) > 1})
+    repeated = sorted(n for n, count in Counter(names).items() if count > 1)
     if repeated:
         raise InputError(f"two rows have the same image name: {', '.join(repeated[:5])}",
                          listed if listed.is_file() else path)
@@ -119,10 +120,11 @@ def load_poses_bounds(path: str | Path, photos: Sequence[str]) -> PosesBounds:
     for k, (name, row) in enumerate(zip(names, rows)):
         pose = row[:15].reshape(3, 5)
         h, w, f = (float(v) for v in pose[:, 4])
+        h, w = round(h), round(w)
         c2w = np.eye(4)
         c2w[:3, :3], c2w[:3, 3] = pose[:, :3] @ LLFF_TO_OPENCV, pose[:, 3]
         try:
-            cameras.append(Camera(name=name, width=round(w), height=round(h), fx=f, fy=f, cx=w / 2, cy=h / 2,
+            cameras.append(Camera(name=name, width=w, height=h, fx=f, fy=f, cx=w / 2, cy=h / 2,
                                   camera_to_world=c2w.tolist()))
         except ValidationError as e:
             raise InputError(f"row {k} ({name}): {'; '.join(camera_problems(e))}", path) from e

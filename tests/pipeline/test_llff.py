@@ -80,6 +80,13 @@ def test_a_count_mismatch_names_the_file_and_the_fix(tmp_path):
     assert e.value.path.name == "all_image_names.txt"
 
 
+def test_two_rows_of_one_name_are_refused(tmp_path):
+    save_poses_bounds(tmp_path / "poses_bounds.npy", cameras(3), np.ones((3, 2)),
+                      image_names=["a.jpg", "b.jpg", "a.png"])
+    with pytest.raises(InputError, match="two rows have the same image name: a$"):
+        load_poses_bounds(tmp_path / "poses_bounds.npy", ["a", "b"])
+
+
 def test_bad_arrays_are_refused(tmp_path):
     path = tmp_path / "poses_bounds.npy"
     np.save(path, np.zeros((3, 15)))
