@@ -38,7 +38,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
+from PIL import Image
 
 from pipeline.alignment import compare_poses
 from pipeline.cameras import CameraSet
@@ -64,6 +66,7 @@ ORCA = Path(sys.executable).parent / "orca"  # the CLI installed beside this Pyt
 PHOTO_GLOB = "*.jpg"
 FRONT_END = (DECODE, POSES, MASKS)
 LOG_TAIL_LINES = 30
+HALF = 0.5  # a resized reference mask's pixel is object where at least half of it was
 # The poses stage accepts any number of registered photos (3 at least), so a partial registration is scored
 # rather than stopping the run; --set poses.min_registered_fraction=... puts the stage's own threshold back.
 BENCH_OVERRIDES = ("poses.min_registered_fraction=0.01",)
@@ -168,6 +171,14 @@ def pose_agreement(cameras: CameraSet, reference: CameraSet) -> dict[str, Any]:
     }
 
 
+def reference_mask(path: Path, size: tuple[int, int]) -> np.ndarray:
+    """``(H, W)`` bool reference mask at ``size`` (width, height): thresholded at the file's own size, then
+    area-averaged and taken where at least half object (a resized 0/255 mask can exceed 255 by rounding,
+    which a threshold after resizing mistakes for a 16-bit encoding)."""
+    full = read_mask(path, Image.open(path).size)
+    return cv2.resize(full.astype(np.float32), size, interpolation=cv2.INTER_AREA) >= HALF
+
+
 def masks_agreement(masks_dir: Path, dataset: Path = DATASET) -> dict[str, Any]:
     """IoU of each mask of a masks stage folder with the reference mask of its photo resized to it.
 
@@ -179,7 +190,7 @@ def masks_agreement(masks_dir: Path, dataset: Path = DATASET) -> dict[str, Any]:
     for name in masks.names:
         ours = masks.mask(name)
         h, w = ours.shape
-        scores[name] = iou(ours, read_mask(dataset / USER_MASKS / f"{name}.png", (w, h)))
+        scores[name] = iou(ours, reference_mask(dataset / USER_MASKS / f"{name}.png", (w, h)))
     values = np.array(list(scores.values()))
     worst = min(scores, key=scores.get)
     return {"views": len(scores), "iou_median": float(np.median(values)), "iou_mean": float(values.mean()),

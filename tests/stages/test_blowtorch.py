@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 from helpers import TESTDATA
 
-from bench.blowtorch import build_capture, run_front_end, score, select_photos
+from bench.blowtorch import build_capture, reference_mask, run_front_end, score, select_photos
 
 DATASET = TESTDATA / "real" / "blowtorch"
 PHOTOS, DOWNSCALE = 16, 4  # 2120x1415 -> 530x353
@@ -18,9 +18,18 @@ ROTATION_DEG_MEDIAN, ROTATION_DEG_MAX = 0.5, 2.0
 CENTRE_MEDIAN_FRACTION, CENTRE_MAX_FRACTION = 0.02, 0.05  # of the cameras' mean distance from their centroid
 IOU_MEDIAN, IOU_WORST = 0.95, 0.90
 
-pytestmark = [pytest.mark.slow, pytest.mark.skipif(not DATASET.is_dir(), reason="no blowtorch test data")]
+pytestmark = pytest.mark.skipif(not DATASET.is_dir(), reason="no blowtorch test data")
 
 
+def test_reference_masks_keep_their_object_at_the_decoded_size():
+    """Every reference mask resized to decode.downscale 2's 1060x707 covers the share of the photo it covers
+    at 2120x1415 (a 0/255 mask resized by area averaging can exceed 255 and be misread as 16-bit, and empty)."""
+    for path in sorted((DATASET / "masks").glob("*.png")):
+        full, small = reference_mask(path, (2120, 1415)), reference_mask(path, (1060, 707))
+        assert small.shape == (707, 1060) and abs(small.mean() - full.mean()) < 0.01, path.name
+
+
+@pytest.mark.slow
 @pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
     "not reached yet: SfM starts no model on these 16 photos at 530 px (2 of 16 register at 1060 px), and with "
     "the reference cameras the automatic masks reach IoU median 0.56, worst 0.48 (burner and handle cut off)"))
