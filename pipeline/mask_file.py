@@ -64,11 +64,12 @@ def read_mask(path: Path, size: tuple[int, int]) -> np.ndarray:
         m = m[..., : min(3, m.shape[2])].max(axis=-1)
     if m.dtype.kind == "f":
         m = np.nan_to_num(m)
-    m = mask_at_photo_size(m, size, path)
+    # The encoding's full scale from the file's own values: an area resize rounds 255 up to 255.00002, which
+    # must not read as a 16-bit mask. 0/1 masks (max 1) and 0/255 or 0/65535 alike: above half of it.
     top = float(m.max())
+    m = mask_at_photo_size(m, size, path)
     if top <= 0:
         log.warning("%s: the mask is empty (no object pixels)", path)
         return np.zeros(m.shape, bool)
-    # 0/1 masks (max 1) and 0/255 or 0/65535 masks alike: above half of the encoding's full scale.
     full = 1.0 if top <= 1.0 else (255.0 if top <= 255.0 else 65535.0)
     return m > full / 2

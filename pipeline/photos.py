@@ -17,12 +17,12 @@ from pathlib import Path
 from typing import Any
 
 from .errors import InputError
-from .layout import CAMERAS_JSON, CAPTURE_CONFIGS, PHOTO_SUBDIR, TRANSFORMS_JSON
+from .layout import CAMERAS_JSON, CAPTURE_CONFIGS, LLFF_IMAGE_NAMES, PHOTO_SUBDIR, POSES_BOUNDS, TRANSFORMS_JSON
 from .raw import PHOTO_SUFFIXES, RAW_SUFFIXES, PhotoInfo
 
 log = logging.getLogger("orca.decode")
 
-NOT_PHOTOS = {*CAPTURE_CONFIGS, CAMERAS_JSON, TRANSFORMS_JSON}  # the last two: known cameras
+NOT_PHOTOS = {*CAPTURE_CONFIGS, CAMERAS_JSON, TRANSFORMS_JSON, POSES_BOUNDS, LLFF_IMAGE_NAMES}  # known cameras
 EXPOSURE_FIELDS = ("shutter_s", "iso", "f_number")
 
 # ------------------------------------------------------------------------------------------- finding photos

@@ -54,6 +54,15 @@ def test_a_mask_at_another_scale_is_resized_and_another_aspect_is_refused(tmp_pa
         read_mask(tmp_path / "c.png", (48, 36))
 
 
+def test_a_0_255_mask_resized_by_a_fraction_stays_8_bit(tmp_path):
+    # An area resize by 111/300 sums 255s into 255.00003: still an 8-bit mask, not a nearly empty 16-bit one.
+    big = np.zeros((200, 300), np.uint8)
+    big[50:150, 75:225] = 255
+    write_png(tmp_path / "a.png", big)
+    small = read_mask(tmp_path / "a.png", (111, 74))
+    assert 0.2 < small.mean() < 0.3
+
+
 def test_mask_names_must_match_the_photos(tmp_path):
     names = ["IMG_0001", "IMG_0002"]
     for f in ("IMG_0001.png", "IMG_0002.jpg.png"):  # our naming, and COLMAP's <image>.png
