@@ -64,7 +64,7 @@ def cameras_figure(path: Path, cameras: CameraSet, points: np.ndarray | None, co
             line += f"  |  SfM split into {len(report['models'])} models"
     else:
         line += f"  |  known cameras: {Path(report['source']).name}"
-    missing = report["not_registered"]
+    missing = [n for n in report["not_registered"] if n not in (suspects or {})]  # dropped: on the next line
     if missing:
         line += "\nno camera: " + ", ".join(missing[:12]) + (" ..." if len(missing) > 12 else "")
     if suspects:
