@@ -124,11 +124,12 @@ def run_stage(stage: str, capture: Path, results: Path, overrides: Sequence[str]
     return StageRun(stage, seconds, usage.ru_maxrss / 1024, proc.returncode, log.read_text(encoding="utf-8"))
 
 
-def run_front_end(capture: Path, results: Path, overrides: Sequence[str] = ()) -> dict[str, StageRun]:
-    """decode, poses, masks one after the other into ``results/``; stops at the first that fails."""
+def run_front_end(capture: Path, results: Path, overrides: Sequence[str] = (),
+                  stages: Sequence[str] = FRONT_END) -> dict[str, StageRun]:
+    """``stages`` (decode, poses, masks) one after the other into ``results/``; stops at the first that fails."""
     results.mkdir(parents=True, exist_ok=True)
     runs: dict[str, StageRun] = {}
-    for stage in FRONT_END:
+    for stage in stages:
         runs[stage] = run_stage(stage, capture, results, overrides)
         if runs[stage].returncode:
             break

@@ -38,7 +38,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run as a script: bench.blowtorch's shared helpers
 
-from bench.blowtorch import ORCA, commit, machine, pose_agreement, run_front_end  # noqa: E402
+from bench.blowtorch import FRONT_END, ORCA, commit, machine, pose_agreement, run_front_end  # noqa: E402
 from pipeline.cameras import CameraSet, load_cameras  # noqa: E402
 from pipeline.layout import CAMERAS_JSON, DECODE, GROUND_TRUTH, MASKS, POSES, SRGB  # noqa: E402
 from pipeline.mask_file import read_mask  # noqa: E402
@@ -104,11 +104,12 @@ def score_poses(cameras: CameraSet, truth: CameraSet) -> dict[str, Any]:
     return {k: v for k, v in figures.items() if k != "per_camera"}
 
 
-def run_scene(seed: int, cache: Path, work: Path, overrides: list[str], plain: bool) -> dict[str, Any]:
+def run_scene(seed: int, cache: Path, work: Path, overrides: list[str], plain: bool,
+              stages: tuple[str, ...] = FRONT_END) -> dict[str, Any]:
     capture = render(seed, cache)
     truth = load_cameras(capture / GROUND_TRUTH / CAMERAS_JSON)
     results = work / f"random-{seed}"
-    runs = run_front_end(capture, results, [*BENCH_OVERRIDES, *overrides])
+    runs = run_front_end(capture, results, [*BENCH_OVERRIDES, *overrides], stages)
     names = [c.name for c in truth.cameras]
     record: dict[str, Any] = {"seed": seed, "traits": traits(get_scene(f"random-{seed}")), "photos": len(names),
                               "stages": {s: {"seconds": round(r.seconds, 1), "peak_rss_mb": round(r.peak_rss_mb),
@@ -189,6 +190,8 @@ def main() -> None:
     parser.add_argument("--work", type=Path, default=None, help="keep the stages' folders here (default: removed)")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     parser.add_argument("--no-plain", action="store_true", help="skip the plain-pycolmap baseline")
+    parser.add_argument("--until", choices=FRONT_END[1:], default=FRONT_END[-1],
+                        help="the last stage run (poses: no masks)")
     parser.add_argument("--results", type=Path, default=RESULTS)
     parser.add_argument("--no-record", action="store_true", help="append nothing")
     args = parser.parse_args()
@@ -199,7 +202,8 @@ def main() -> None:
     records = []
     try:
         for seed in args.seeds:
-            records.append(run_scene(seed, args.cache, work, args.overrides, not args.no_plain))
+            stages = FRONT_END[:FRONT_END.index(args.until) + 1]
+            records.append(run_scene(seed, args.cache, work, args.overrides, not args.no_plain, stages))
             print(table(records[-1:], summary(records)), flush=True)
     finally:
         if args.work is None:
@@ -207,7 +211,8 @@ def main() -> None:
     total = summary(records)
     print("\n" + table(records, total))
     record = {"date": time.strftime("%Y-%m-%dT%H:%M:%S"), "machine": machine(), "commit": commit(),
-              "settings": {"seeds": args.seeds, "render": list(RENDER), "overrides": args.overrides},
+              "settings": {"seeds": args.seeds, "render": list(RENDER), "overrides": args.overrides,
+                           "until": args.until},
               "seconds": round(time.perf_counter() - started), "suite": total,
               "scenes": [{k: ({f: v for f, v in r[k].items() if f != "per_view"} if k == "masks" else r[k])
                           for k in r} for r in records]}

@@ -101,6 +101,17 @@ class PosesConfig(StrictModel):
         "(wrapping around, as a capture circles the object); 'auto': exhaustive up to exhaustive_max_images.",
     )
     exhaustive_max_images: int = Field(60, ge=2, description="'auto' matches exhaustively up to this many photos.")
+    mapper: Literal["auto", "incremental", "global"] = Field(
+        "auto",
+        description="'incremental': COLMAP's incremental mapper; 'global': GLOMAP's global mapper (every photo placed "
+        "at once: one model where weak overlap splits the incremental one); 'auto': incremental, and when it leaves "
+        "photos out (a split, photos not registered), the global mapper on the same matches, kept if it registers "
+        "more (both then go through the pose checks).",
+    )
+    global_min_observations: int = Field(
+        30, ge=0, description="the global mapper's photos supported by fewer of its 3D points than this get no "
+        "camera (the incremental mapper's own bar for registering a photo)."
+    )
     sequential_overlap: int = Field(
         12, ge=1, description="'sequential': neighbours on each side, plus photos 2^k apart (loop closure)."
     )
@@ -259,6 +270,17 @@ class MasksConfig(StrictModel):
     through_views: int = Field(
         40, ge=1, description="...compared with at most this many other views, spread around the object (the test "
         "costs this many image warps per view and round; with more photos, a subset on every side)"
+    )
+    prior_growth: float = Field(
+        1.5, gt=1, description="when the probe's masks reach the poses stage's sphere's outline in many views (the "
+        "object is larger than that sphere and cut by it), the sphere is re-centred on the probe's hull and grown by "
+        "this, and probed again (pipeline.masking.prior)"
+    )
+    prior_max_growth: float = Field(
+        3.0, ge=1, description="...up to this many times the poses stage's radius (1: the poses stage's sphere as is)"
+    )
+    prior_touch_share: float = Field(
+        0.25, ge=0, le=1, description="...'many views': more than this share of them"
     )
     sphere_margin: float = Field(1.05, ge=1, description="the object's refined bounding sphere is enlarged by this")
     renormalize: bool = Field(

@@ -76,6 +76,7 @@ class SfmResult:
     num_pairs: int  # image pairs matched
     num_verified_pairs: int  # pairs with a verified two-view geometry
     seconds: dict[str, float] = field(default_factory=dict)
+    mapper: str = "incremental"  # which mapper made the model: "incremental" or "global"
 
 
 def colmap_name(name: str) -> str:
@@ -300,15 +301,29 @@ def run_sfm(
         if progress is not None:
             progress.advance(task)
 
-    models = pycolmap.incremental_mapping(db_path, image_dir, sparse, options, next_image_callback=next_image)
-    seconds["mapping"] = time.time() - t
+    mapper = "incremental" if config.mapper == "auto" else config.mapper
+    if mapper == "incremental":
+        models = pycolmap.incremental_mapping(db_path, image_dir, sparse, options, next_image_callback=next_image)
+    else:
+        models = global_models(db_path, image_dir, sparse, config, threads, len(names))
     ranked = sorted(models.values(), key=lambda r: r.num_reg_images(), reverse=True)
+    if config.mapper == "auto" and (not ranked or ranked[0].num_reg_images() < len(names)):
+        log.info("incremental mapping registered %d of %d photos (models: %s); trying the global mapper on the same "
+                 "matches", ranked[0].num_reg_images() if ranked else 0, len(names),
+                 " + ".join(str(r.num_reg_images()) for r in ranked) or "none")
+        (work / "sparse_global").mkdir()
+        found = sorted(global_models(db_path, image_dir, work / "sparse_global", config, threads, len(names)).values(),
+                       key=lambda r: r.num_reg_images(), reverse=True)
+        if found and (not ranked or found[0].num_reg_images() > ranked[0].num_reg_images()):
+            log.info("the global mapper's model is kept: %d photos registered", found[0].num_reg_images())
+            ranked, mapper = found, "global"
+    seconds["mapping"] = time.time() - t
     if not ranked:
         raise _no_model_error(db_path, names, features, num_verified, folder)
     best = ranked[0]
     others = [sorted(stem_of(im.name) for im in r.images.values() if im.has_pose) for r in ranked[1:]]
     result = SfmResult(best, [r.num_reg_images() for r in ranked], others, features, matcher, num_pairs,
-                       num_verified, seconds)
+                       num_verified, seconds, mapper)
     _check_registered(result, names, config, folder)
     return result
 
@@ -332,6 +347,35 @@ def _mapper_options(config: PosesConfig, groups: Sequence[CameraGroup], threads:
         options.mapper.abs_pose_refine_focal_length = False
         options.mapper.abs_pose_refine_extra_params = False
     return options
+
+
+def global_models(db_path: Path, image_dir: Path, out: Path, config: PosesConfig, threads: int,
+                  n: int) -> dict[int, pycolmap.Reconstruction]:
+    """Models of GLOMAP's global mapper (pycolmap.global_mapping) on a matched database, each without the photos
+    fewer than ``poses.global_min_observations`` of its 3D points support.
+
+    The global mapper places every photo of the view graph at once (rotation averaging, then positions), so a
+    capture whose neighbouring photos overlap weakly stays one model where the incremental mapper splits it. But
+    it registers a photo however little supports it: one with a few observations can be far off (on a real
+    walk-around with 10-30 degree gaps, photos under 30 observations were off by up to 24 degrees, the others
+    agreed with the photographers' poses as well as the incremental mapper's). The incremental mapper needs
+    ``abs_pose_min_num_inliers`` (30) 2D-3D inliers to register a photo; the same bar is applied here.
+    """
+    pycolmap = import_pycolmap()
+
+    options = pycolmap.GlobalPipelineOptions()
+    options.num_threads = threads
+    options.random_seed = config.seed
+    options.min_model_size = min(n, max(3, config.min_registered))
+    models = pycolmap.global_mapping(db_path, image_dir, out, options)
+    for rec in models.values():
+        weak = [im for im in rec.images.values() if im.has_pose and im.num_points3D < config.global_min_observations]
+        if weak:
+            log.info("global mapper: %d photo(s) with fewer than %d observations left out: %s", len(weak),
+                     config.global_min_observations, ", ".join(stem_of(im.name) for im in weak))
+        for frame_id in {im.frame_id for im in weak}:  # one photo per frame (no rigs here)
+            rec.deregister_frame(frame_id)
+    return models
 
 
 def _feature_counts(db_path: Path) -> dict[str, int]:
@@ -512,6 +556,7 @@ def posed_from_sfm(decoded: DecodeArtifacts, names: list[str], calibration: tupl
     per_image_error = _per_image_reprojection_error(rec)
     stats = {
         "matcher": sfm.matcher,
+        "mapper": sfm.mapper,
         "pairs_matched": sfm.num_pairs,
         "pairs_verified": sfm.num_verified_pairs,
         "models": sfm.model_sizes,

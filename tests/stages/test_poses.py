@@ -206,6 +206,24 @@ def test_torus_capture_registers_every_view_accurately(sfm_torus_capture, sfm_to
     assert err["object_centre_offset"] <= 0.02, err
 
 
+@pytest.mark.slow
+def test_the_global_mapper_registers_the_sphere_capture_as_accurately(sfm_sphere_capture, sfm_sphere_decode,
+                                                                       tmp_path):
+    """poses.mapper=global (GLOMAP): every view, as accurate as the incremental mapper; photos its 3D points
+    support too little get no camera (here: a bar no photo reaches)."""
+    result = run(sfm_sphere_capture, sfm_sphere_decode, tmp_path / "poses", PosesConfig(num_threads=2, mapper="global"))
+    truth = load_cameras(sfm_sphere_capture / "ground_truth" / "cameras.json")
+    assert result.registered == result.total == len(truth) == 20
+    assert read_json(tmp_path / "poses" / "poses_report.json")["mapper"] == "global"
+    err = errors_against_truth(result.cameras, truth)
+    print(f"sphere, global mapper: {err}")
+    assert err["rotation_deg_median"] <= 0.2, err
+    assert err["centre_median_fraction"] <= 0.005, err
+    with pytest.raises(InputError, match="only 0 of 20 photos registered|SfM found no model"):
+        run(sfm_sphere_capture, sfm_sphere_decode, tmp_path / "none",
+            PosesConfig(num_threads=2, mapper="global", global_min_observations=10**7))
+
+
 def test_masks_of_any_encoding_give_the_same_sphere(tiny_capture, tiny_decode, tmp_path):
     """0/1 and alpha-channel masks (as the masks stage reads them) bound the object like 0/255 ones."""
     from pipeline.imageio import read_image, write_png
