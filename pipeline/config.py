@@ -100,7 +100,11 @@ class PosesConfig(StrictModel):
         description="'exhaustive': every pair; 'sequential': each photo with its neighbours in file-name order "
         "(wrapping around, as a capture circles the object); 'auto': exhaustive up to exhaustive_max_images.",
     )
-    exhaustive_max_images: int = Field(60, ge=2, description="'auto' matches exhaustively up to this many photos.")
+    exhaustive_max_images: int = Field(
+        100, ge=2, description="'auto' matches exhaustively up to this many photos (a walk-around in rings is not in "
+        "name order across rings: on 67 real photos in four rings, sequential matching verified 128 pairs, exhaustive "
+        "205, the second model registering twice the photos)."
+    )
     mapper: Literal["auto", "incremental", "global"] = Field(
         "auto",
         description="'incremental': COLMAP's incremental mapper; 'global': GLOMAP's global mapper (every photo placed "

@@ -11,7 +11,8 @@ Intrinsics: each lens/zoom (EXIF make, model, focal length) shares one camera (:
 unless configured, its focal length starting from the EXIF 35 mm-equivalent focal length when the photos record
 it; a calibration (``orca calibrate``) gives OPENCV intrinsics held fixed. Exhaustive matching up to
 ``exhaustive_max_images`` photos, else each photo with its neighbours in name order (wrapping around: no
-vocabulary tree needed); the model with the most photos is used and a split is reported.
+vocabulary tree needed); incremental mapping, and the global mapper (GLOMAP) when that leaves photos out
+(:func:`global_models`); the model with the most photos is used and a split is reported.
 """
 
 from __future__ import annotations
