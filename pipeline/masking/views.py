@@ -83,6 +83,9 @@ class SegmentOptions:
     through_min_px: int = 16
     through_reach_px: int = 20
     through_views: int = 40
+    prior_growth: float = 1.5
+    prior_max_growth: float = 3.0
+    prior_touch_share: float = 0.25
 
 
 def pixel_rays(view: View, box: tuple[int, int, int, int] | None = None) -> np.ndarray:

@@ -74,9 +74,10 @@ from ..layout import (
 )
 from ..log import progress
 from ..masking.hull import carve, carve_votes, hull_grid, reproject
+from ..masking.prior import PriorSphere, find_prior_sphere, in_sphere_frame, touching_views
 from ..masking.scale import full_size_mask, load_view, reduce
 from ..masking.segment import segment
-from ..masking.views import Plane, SegmentOptions, View, sphere_distance
+from ..masking.views import Plane, SegmentOptions, View
 from ..metrics import iou
 from ..object_frame import renormalized, sphere_from_masks
 from ..provenance import FORCE_HELP, check_capture_folder, common_capture
@@ -158,7 +159,12 @@ def run_masks(
         if len(fixed) == len(views):
             log.info("every view has a user mask: the automatic method is skipped")
             final, plane, rounds = [fixed[i] for i in range(len(views))], None, []
+            prior = PriorSphere(np.zeros(3), 1.0, [])
         else:
+            probe = bar.add_task("sphere prior", total=None)
+            prior = find_prior_sphere(views, opts, lambda vs, o: segment(vs, o, fixed=fixed).masks)
+            bar.update(probe, total=1, completed=1)
+            views = [in_sphere_frame(v, prior.centre, prior.radius) for v in views]
             # the support plane, floor and first GrabCut per view; per round the carve, GrabCut per view and, from
             # the second, the evidence against the hull per view
             n = len(views)
@@ -181,11 +187,16 @@ def run_masks(
     sphere = sphere_from_masks(final, c2w, K, np.zeros(3), 1.0, floor=floor)
     if sphere is None:
         warnings.append("the masks' visual hull is empty (the masks disagree with each other or with the "
-                        "cameras); the poses stage's sphere is kept")
+                        "cameras); the sphere the masks were searched in is kept")
         centre, radius = np.zeros(3), 1.0
     else:
         centre, radius = sphere[0], sphere[1] * config.sphere_margin
-    warnings += _check(names, final, agreement, views, radius, config)
+    warnings += _check(names, final, agreement, views, radius, prior, config)
+    # back to the poses frame: segmentation ran where the prior sphere is the unit sphere
+    centre, radius = prior.centre + prior.radius * centre, prior.radius * radius
+    if plane is not None:
+        plane = Plane(plane.normal, float(prior.radius * plane.offset + plane.normal @ prior.centre),
+                      plane.consistent_fraction)
     for w in warnings:
         log.warning("%s", w)
 
@@ -221,6 +232,10 @@ def run_masks(
         save_cameras(tmp / CAMERAS_JSON, renormalized(moved, centre, radius) if config.renormalize else moved)
         report = _report(records, agreement, (centre, radius, sphere is not None), config, plane, rounds, warnings,
                          scale, user_dir, time.time() - started)
+        report["sphere_prior"] = {
+            "what": "the sphere segmentation ran in (poses frame): the poses stage's unit sphere, grown while the "
+            "probe's masks reached its outline (pipeline.masking.prior)",
+            "centre": prior.centre.tolist(), "radius": prior.radius, "probes": prior.probes}
         write_json(tmp / MASKS_REPORT, report)
         inputs: dict[str, Path] = {CAMERAS_JSON: poses_dir / CAMERAS_JSON, DECODE_JSON: decoded.folder / DECODE_JSON}
         inputs.update({f"user_mask:{n}": p for n, p in user_files.items()})
@@ -252,9 +267,10 @@ def _photos_without_camera(poses_dir: Path, decoded: DecodeArtifacts, names: lis
 
 
 def _check(names: list[str], masks: list[np.ndarray], agreement: list[float], views: list[View], radius: float,
-           config: MasksConfig) -> list[str]:
+           prior: PriorSphere, config: MasksConfig) -> list[str]:
     """Warnings a person should act on: empty masks, views that disagree with the hull, an object that seems
-    larger than the poses stage's sphere (its masks were clipped by that sphere's image)."""
+    larger than the sphere the masks were searched in (its masks were clipped by that sphere's image). ``views``
+    and ``radius``: in the frame where ``prior`` is the unit sphere."""
     out = []
     empty = [n for n, m in zip(names, masks) if not m.any()]
     if empty:
@@ -264,14 +280,11 @@ def _check(names: list[str], masks: list[np.ndarray], agreement: list[float], vi
         out.append(f"{len(bad)} view(s) disagree with the visual hull (IoU < {config.agreement_warning}): "
                    + ", ".join(f"{n} ({a:.2f})" for n, a in bad[:10])
                    + "; check their overlays, or give corrected masks for them in CAPTURE/masks/")
-    touching = 0
-    for v, m in zip(views, masks):
-        rim = (sphere_distance(v) > 0.97) & (sphere_distance(v) < 1.0)
-        touching += bool(np.count_nonzero(m & rim) > 0.02 * max(1, np.count_nonzero(rim)))
-    if touching > 0.25 * len(views) or radius > 1.0:
-        out.append(f"the object reaches the edge of the poses stage's sphere in {touching} view(s): it may be "
-                   "larger than that sphere and cut; rerun poses with a larger poses.radius_margin or "
-                   "poses.object_window, or give masks")
+    touching = touching_views(masks, views)
+    if touching > config.prior_touch_share * len(views) or radius > 1.0:
+        out.append(f"the object reaches the edge of the sphere the masks were searched in ({prior.radius:.2f} times "
+                   f"the poses stage's) in {touching} view(s): it may be larger and cut; raise "
+                   "masks.prior_max_growth, rerun poses with a larger poses.object_window, or give masks")
     return out
 
 

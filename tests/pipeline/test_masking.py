@@ -9,6 +9,7 @@ import numpy as np
 
 from pipeline.cameras import look_at
 from pipeline.masking.hull import carve, hull_depth, hull_grid, reproject
+from pipeline.masking.prior import find_prior_sphere, in_sphere_frame
 from pipeline.masking.sweeps import column_image, column_in_hull, corner_strength, floor_through_hull, front_evidence
 from pipeline.masking.views import (
     Plane,
@@ -264,3 +265,48 @@ def test_the_floor_seen_through_a_too_large_hull_is_found_and_the_mirror_is_not(
         found = floor_through_hull(view, views[:i] + views[i + 1:], FLOOR, hull, SegmentOptions())
         assert (found & balls[i]).sum() == 0
         assert (found & ~balls[i] & hull).sum() > 0.5 * (~balls[i] & hull).sum()
+
+
+def ball_silhouette(view: View, centre: np.ndarray, radius: float) -> np.ndarray:
+    """``(H, W)`` bool: the pixels whose ray passes within ``radius`` of ``centre`` (in front of the camera)."""
+    return ball_distance(view, centre) < radius
+
+
+def clipped_ball_masks(centre: np.ndarray, radius: float, views: list[View]):
+    """A stand-in for the segmentation: the ball's exact silhouettes, cut by the (framed) unit sphere's image --
+    what the sphere prior does to an object larger than the sphere."""
+    silhouettes = {v.name: ball_silhouette(v, centre, radius) for v in views}
+    return lambda framed, opts: [silhouettes[v.name] & (sphere_distance(v) < 1.0) for v in framed]
+
+
+def test_the_sphere_prior_grows_until_it_contains_an_object_larger_than_the_poses_sphere():
+    """A ball of radius 1.6 off the centre by 0.4: the unit sphere cuts it in every view; the prior grows and
+    re-centres until the ball is inside (its masks no longer reach the outline), within the growth limit."""
+    views = ring_views(12, size=(200, 150)) + ring_views(8, size=(200, 150), elevation_deg=50.0)
+    centre, radius = np.array([0.4, 0.0, 0.0]), 1.6
+    prior = find_prior_sphere(views, SegmentOptions(), clipped_ball_masks(centre, radius, views))
+    assert len(prior.probes) > 1
+    assert np.linalg.norm(prior.centre - centre) + radius < prior.radius <= SegmentOptions().prior_max_growth
+    assert prior.probes[-1]["touching_views"] <= SegmentOptions().prior_touch_share * len(views)
+
+
+def test_the_sphere_prior_stays_the_poses_sphere_when_the_object_is_inside():
+    views = ring_views(12, size=(200, 150))
+    prior = find_prior_sphere(views, SegmentOptions(), clipped_ball_masks(np.array([0.1, 0.0, 0.0]), 0.6, views))
+    assert prior.radius == 1.0 and len(prior.probes) == 1 and prior.probes[0]["touching_views"] == 0
+    np.testing.assert_array_equal(prior.centre, np.zeros(3))
+
+
+def test_a_view_in_the_sphere_frame_sees_the_sphere_as_the_unit_sphere():
+    view = ring_views(1)[0]
+    centre, radius = np.array([0.2, -0.1, 0.3]), 1.7
+    framed = in_sphere_frame(view, centre, radius)
+    np.testing.assert_allclose(sphere_distance(framed), ball_distance(view, centre) / radius, rtol=1e-5)
+
+
+def ball_distance(view: View, centre: np.ndarray) -> np.ndarray:
+    """``(H, W)`` distance of each pixel's ray from ``centre`` (inf behind the camera)."""
+    to_centre = centre - view.c2w[:3, 3]
+    rays = pixel_rays(view)
+    along = rays @ to_centre
+    return np.where(along > 0, np.linalg.norm(to_centre - along[..., None] * rays, axis=-1), np.inf)

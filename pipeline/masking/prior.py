@@ -1,0 +1,98 @@
+"""The sphere prior, re-estimated from the views: a sphere that really contains the object.
+
+The poses stage's sphere is a guess when it had no masks and no sparse points on a plane (the "framing": a
+sphere at the cameras' convergence that fills ``poses.object_window`` of the frame). An elongated object that is
+not centred in the photos, or one framed larger than that window, reaches past it -- and everything outside the
+sphere's image is certain background, so the masks cut the object (the real blowtorch walk-around: the
+reference masks' visual hull has twice the framing sphere's radius, and 30 % of the object lay outside it).
+
+So the masks are probed first: cheap masks (the sphere prior and one round of carving, no floor or sweeps) in the
+frame where the current sphere is the unit sphere. Where they reach the sphere's outline in more than
+``prior_touch_share`` of the views the object is cut by the sphere: the sphere is re-centred on the probe's hull
+and grown by ``prior_growth``, and probed again (at most ``prior_max_growth`` times the first radius). A sphere
+that is larger than the object costs the method little (more background, coarser voxels); one that is too small
+loses the object for certain.
+
+Spheres here are ``(centre (3,), radius)`` in the frame of the views given (the poses stage's).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..object_frame import sphere_from_masks
+from .views import SegmentOptions, View, sphere_distance
+
+log = logging.getLogger("orca.masks")
+
+RIM_INNER = 0.97  # the sphere's outline: pixels whose ray passes between 0.97 and 1 radius from its centre
+RIM_COVERED = 0.02  # a mask touches the outline when it covers this share of the outline's pixels
+PROBE_EXTENT = 1.0  # the probe's hull is carved in the unit sphere's cube
+
+
+@dataclass(frozen=True)
+class PriorSphere:
+    """The sphere segmentation works in, and how it was found."""
+
+    centre: np.ndarray  # (3,) frame of the views given
+    radius: float
+    probes: list[dict[str, float]]  # per probe: its radius and centre, views touching the outline
+
+
+def in_sphere_frame(view: View, centre: np.ndarray, radius: float) -> View:
+    """``view`` with its camera in the frame where the sphere ``(centre, radius)`` is the unit sphere at the
+    origin (a translation and a uniform scale: the image and intrinsics are unchanged)."""
+    c2w = view.c2w.copy()
+    c2w[:3, 3] = (c2w[:3, 3] - centre) / radius
+    return replace(view, c2w=c2w)
+
+
+def touches_outline(mask: np.ndarray, distance: np.ndarray) -> bool:
+    """Whether ``mask`` ``(H, W)`` reaches the unit sphere's outline; ``distance``: :func:`sphere_distance`."""
+    rim = (distance > RIM_INNER) & (distance < 1.0)
+    return np.count_nonzero(mask & rim) > RIM_COVERED * max(1, np.count_nonzero(rim))
+
+
+def touching_views(masks: Sequence[np.ndarray], views: Sequence[View]) -> int:
+    """How many of the ``masks`` reach the unit sphere's outline in their view (views in the sphere's frame)."""
+    return sum(touches_outline(m, sphere_distance(v)) for m, v in zip(masks, views))
+
+
+def grown(masks: Sequence[np.ndarray], views: Sequence[View], growth: float) -> tuple[np.ndarray, float]:
+    """The next sphere, in the frame of ``views`` (where the current sphere is the unit sphere): centred on the
+    bounding sphere of the ``masks``' visual hull (cut by the current sphere, it leans towards where the object
+    goes on), radius ``growth`` (the origin when the hull is empty)."""
+    c2w = np.stack([v.c2w for v in views])
+    K = np.stack([v.K for v in views])
+    hull = sphere_from_masks(masks, c2w, K, np.zeros(3), PROBE_EXTENT)
+    centre = np.zeros(3) if hull is None else np.asarray(hull[0], float)
+    return centre, float(growth)
+
+
+def probe_options(opts: SegmentOptions) -> SegmentOptions:
+    """The cheap segmentation a probe runs: the sphere prior and one round of carving, no floor, no sweeps."""
+    return replace(opts, rounds=1, floor=False, sweep=False, front_sweep=False, through_floor=False)
+
+
+def find_prior_sphere(views: Sequence[View], opts: SegmentOptions,
+                      segment: Callable[[Sequence[View], SegmentOptions], list[np.ndarray]]) -> PriorSphere:
+    """The sphere (frame of ``views``) that contains the object: the unit sphere, grown while the probe's masks
+    reach its outline (see the module doc). ``segment``: views, options -> masks (the driver)."""
+    centre, radius = np.zeros(3), 1.0
+    probes: list[dict[str, float]] = []
+    cheap = probe_options(opts)
+    while True:
+        framed = [in_sphere_frame(v, centre, radius) for v in views]
+        masks = segment(framed, cheap)
+        touching = touching_views(masks, framed)
+        probes.append({"radius": radius, "centre": centre.tolist(), "touching_views": touching})
+        log.info("sphere prior radius %.2f: the probe's masks reach its outline in %d of %d views", radius, touching,
+                 len(views))
+        if touching <= opts.prior_touch_share * len(views) or radius >= opts.prior_max_growth:
+            return PriorSphere(centre, radius, probes)
+        step, factor = grown(masks, framed, min(opts.prior_growth, opts.prior_max_growth / radius))
+        centre, radius = centre + radius * step, radius * factor
