@@ -44,6 +44,7 @@ from pipeline.layout import CAMERAS_JSON, DECODE, GROUND_TRUTH, MASKS, POSES, SR
 from pipeline.mask_file import read_mask  # noqa: E402
 from pipeline.metrics import iou  # noqa: E402
 from pipeline.results import load_masks, load_poses  # noqa: E402
+from pipeline.sfm import quiet_colmap  # noqa: E402
 from pipeline.signals import import_pycolmap  # noqa: E402
 from pipeline.synth.family import FRONT_END_SUITE, traits  # noqa: E402
 from pipeline.synth.scenes import get_scene  # noqa: E402
@@ -70,6 +71,7 @@ def render(seed: int, cache: Path) -> Path:
 def plain_pycolmap(srgb: Path, work: Path) -> dict[str, np.ndarray]:
     """Camera-to-world ``(4, 4)`` per photo stem from pycolmap with its defaults (the largest model)."""
     pycolmap = import_pycolmap()
+    quiet_colmap(verbose=False)
     work.mkdir(parents=True)
     db = work / "database.db"
     pycolmap.extract_features(db, srgb, camera_mode=pycolmap.CameraMode.SINGLE)
@@ -197,6 +199,8 @@ def main() -> None:
     args = parser.parse_args()
 
     args.cache.mkdir(parents=True, exist_ok=True)
+    if args.work is not None:
+        args.work.mkdir(parents=True, exist_ok=True)
     work = Path(tempfile.mkdtemp(prefix="front_end_", dir=args.work))
     started = time.perf_counter()
     records = []

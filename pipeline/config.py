@@ -112,6 +112,15 @@ class PosesConfig(StrictModel):
         "photos out (a split, photos not registered), the global mapper on the same matches, kept if it registers "
         "more (both then go through the pose checks).",
     )
+    object_points: Literal["drop", "keep"] = Field(
+        "drop", description="'drop': after SfM, the sparse points inside the object's sphere (a glossy object's "
+        "reflections) are deleted and the cameras bundle-adjusted again on the surroundings alone; 'keep': as SfM "
+        "left them. Not done when object masks hid the object from SfM already."
+    )
+    object_points_max_share: float = Field(
+        0.3, gt=0, le=1, description="...unless the sphere holds more than this share of the points (then it is not "
+        "trusted)."
+    )
     global_min_observations: int = Field(
         30, ge=0, description="the global mapper's photos supported by fewer of its 3D points than this get no "
         "camera (the incremental mapper's own bar for registering a photo)."

@@ -86,7 +86,15 @@ from ..pose_checks import PoseChecks, frame_up_check
 from ..provenance import FORCE_HELP, check_capture_folder, common_capture
 from ..qa import cameras_figure
 from ..results import load_decode
-from ..sfm import act_on_suspects, check_not_identical, posed_from_sfm_checked, quiet_colmap, thumbnail
+from ..sfm import (
+    act_on_suspects,
+    check_not_identical,
+    posed_from_sfm_checked,
+    quiet_colmap,
+    refine_without_object,
+    thumbnail,
+    without_dropped,
+)
 from ..transforms import save_transforms
 from ..undistort import UndistortMaps, pinhole, undistort_mask, undistortion, write_undistorted
 
@@ -152,15 +160,18 @@ def run_poses(
                 log.warning("near-identical photos (the camera did not move between them): %s",
                             "; ".join(", ".join(g) for g in duplicates))
             sfm = posed_from_sfm_checked(decoded, names, calibration, mask_files, tmp / "work", config, photo_dir)
-            posed, reconstruction, checks = sfm.posed, sfm.reconstruction, sfm.checks
+            posed, checks = sfm.posed, sfm.checks
+            suspects = {n: posed.c2w[posed.names.index(n), :3, 3] for n in checks.flagged}
+            posed = act_on_suspects(posed, checks, len(names), config, photo_dir)
+            reconstruction = without_dropped(sfm.reconstruction, posed.names)
+            if config.object_points == "drop" and not mask_files:
+                posed, _ = refine_without_object(reconstruction, posed, config)
             (tmp / SPARSE).mkdir()
             reconstruction.write(tmp / SPARSE)
             if config.keep_database:
                 shutil.move(str(sfm.work / SFM_DATABASE), str(tmp / SFM_DATABASE))
             for work in sfm.folders:
                 shutil.rmtree(work)
-            suspects = {n: posed.c2w[posed.names.index(n), :3, 3] for n in checks.flagged}
-            posed = act_on_suspects(posed, checks, len(names), config, photo_dir)
             checks_runs = sfm.runs
             source = "sfm"
             if duplicates:

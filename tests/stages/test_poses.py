@@ -224,6 +224,23 @@ def test_the_global_mapper_registers_the_sphere_capture_as_accurately(sfm_sphere
             PosesConfig(num_threads=2, mapper="global", global_min_observations=10**7))
 
 
+@pytest.mark.slow
+def test_photos_dropped_as_doubtful_have_no_camera_anywhere(sfm_sphere_capture, sfm_sphere_decode, tmp_path):
+    """A jump threshold below the orbit's own step spacing doubts some photos: dropped, they are in neither
+    cameras.json nor the COLMAP model other tools start from, and the report says so."""
+    from pipeline.results import load_poses
+
+    out = tmp_path / "poses"
+    run(sfm_sphere_capture, sfm_sphere_decode, out, PosesConfig(num_threads=2, jump_ratio=1.1))
+    report = read_json(out / "poses_report.json")
+    dropped = set(report["checks"]["dropped"])
+    assert dropped, report["checks"]
+    poses = load_poses(out)
+    assert not dropped & set(poses.cameras().by_name())
+    in_model = {Path(im.name).stem for im in poses.reconstruction().images.values() if im.has_pose}
+    assert in_model == set(poses.cameras().by_name())
+
+
 def test_masks_of_any_encoding_give_the_same_sphere(tiny_capture, tiny_decode, tmp_path):
     """0/1 and alpha-channel masks (as the masks stage reads them) bound the object like 0/255 ones."""
     from pipeline.imageio import read_image, write_png
