@@ -109,8 +109,8 @@ class PosesConfig(StrictModel):
         "auto",
         description="'incremental': COLMAP's incremental mapper; 'global': GLOMAP's global mapper (every photo placed "
         "at once: one model where weak overlap splits the incremental one); 'auto': incremental, and when it leaves "
-        "photos out (a split, photos not registered), the global mapper on the same matches, kept if it registers "
-        "more (both then go through the pose checks).",
+        "photos out (a split, photos not registered), the global mapper on the same matches, continued by the "
+        "incremental one, kept if it registers more (both then go through the pose checks).",
     )
     object_points: Literal["drop", "keep"] = Field(
         "drop", description="'drop': after SfM, the sparse points inside the object's sphere (a glossy object's "

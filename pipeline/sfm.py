@@ -305,16 +305,15 @@ def run_sfm(
     mapper = "incremental" if config.mapper == "auto" else config.mapper
     if mapper == "incremental":
         models = pycolmap.incremental_mapping(db_path, image_dir, sparse, options, next_image_callback=next_image)
+        ranked = sorted(models.values(), key=lambda r: r.num_reg_images(), reverse=True)
     else:
-        models = global_models(db_path, image_dir, sparse, config, threads, len(names))
-    ranked = sorted(models.values(), key=lambda r: r.num_reg_images(), reverse=True)
+        ranked = global_then_incremental(db_path, image_dir, sparse, config, options, threads, len(names))
     if config.mapper == "auto" and (not ranked or ranked[0].num_reg_images() < len(names)):
         log.info("incremental mapping registered %d of %d photos (models: %s); trying the global mapper on the same "
                  "matches", ranked[0].num_reg_images() if ranked else 0, len(names),
                  " + ".join(str(r.num_reg_images()) for r in ranked) or "none")
-        (work / "sparse_global").mkdir()
-        found = sorted(global_models(db_path, image_dir, work / "sparse_global", config, threads, len(names)).values(),
-                       key=lambda r: r.num_reg_images(), reverse=True)
+        found = global_then_incremental(db_path, image_dir, work / "sparse_global", config, options, threads,
+                                        len(names))
         if found and (not ranked or found[0].num_reg_images() > ranked[0].num_reg_images()):
             # A warning: where the incremental mapper fails, the view graph is weak, and the global model is
             # less accurate (1-2 degrees on a tiled room where the incremental one stays under 0.1 on posters).
@@ -381,6 +380,34 @@ def global_models(db_path: Path, image_dir: Path, out: Path, config: PosesConfig
         for frame_id in {im.frame_id for im in weak}:  # one photo per frame (no rigs here)
             rec.deregister_frame(frame_id)
     return {k: rec for k, rec in models.items() if rec.num_reg_images() >= options.min_model_size}
+
+
+def global_then_incremental(db_path: Path, image_dir: Path, work: Path, config: PosesConfig, options: Any,
+                            threads: int, n: int) -> list[pycolmap.Reconstruction]:
+    """The global mapper's models (:func:`global_models`), the largest :func:`continued` by the incremental
+    mapper (``options``); largest first."""
+    (work / "global").mkdir(parents=True)
+    found = sorted(global_models(db_path, image_dir, work / "global", config, threads, n).values(),
+                   key=lambda r: r.num_reg_images(), reverse=True)
+    return continued(db_path, image_dir, work / "continued", found[0], options) + found[1:] if found else []
+
+
+def continued(db_path: Path, image_dir: Path, work: Path, rec: pycolmap.Reconstruction,
+              options: Any) -> list[pycolmap.Reconstruction]:
+    """The incremental mapper continued from the global mapper's model ``rec`` (its models, largest first; ``[rec]``
+    when it keeps fewer photos): its triangulation and outlier filtering redo what the global mapper accepted
+    too easily, and its registration adds photos. Measured: the blowtorch walk-around from 52 to 54 photos,
+    rotation agreement with the photographers' poses 0.84 -> 0.48 degrees median (15.7 -> 6.2 max); a tiled
+    room 2.8 -> 1.9 degrees from the truth."""
+    pycolmap = import_pycolmap()
+
+    start, out = work / "start", work / "models"
+    start.mkdir(parents=True)
+    out.mkdir()
+    rec.write(start)
+    models = sorted(pycolmap.incremental_mapping(db_path, image_dir, out, options, input_path=start).values(),
+                    key=lambda r: r.num_reg_images(), reverse=True)
+    return models if models and models[0].num_reg_images() >= rec.num_reg_images() else [rec]
 
 
 def _feature_counts(db_path: Path) -> dict[str, int]:
