@@ -260,8 +260,11 @@ def test_sigterm_stops_a_stage_that_loaded_pycolmap_like_ctrl_c(stage, signal_na
         args = ["masks", capture, "--poses", results / "poses", "--decode", tiny_decode, "--out", results / "masks"]
         held = "pipeline.stages.masks", "contact_sheet"
     marker = tmp_path / "held"
+    # Ctrl-C as a terminal gives it: a shell starts background jobs (`pytest ... &`) with SIGINT ignored, and
+    # Python keeps that for its children.
     proc = subprocess.Popen([sys.executable, "-c", _HELD_ORCA, *held, str(marker), *map(str, args)],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     output = _signal_when(proc, marker.exists, f"{stage} inside its temporary folder", signal.Signals[signal_name])
     assert proc.returncode == status, output[-3000:]
     _stopped_cleanly(output, results, signal_name)
