@@ -165,7 +165,7 @@ def run_poses(
             posed = act_on_suspects(posed, checks, len(names), config, photo_dir)
             reconstruction = without_dropped(sfm.reconstruction, posed.names)
             if config.object_points == "drop" and not mask_files:
-                posed, _ = refine_without_object(reconstruction, posed, config)
+                posed = refine_without_object(reconstruction, posed, config)
             (tmp / SPARSE).mkdir()
             reconstruction.write(tmp / SPARSE)
             if config.keep_database:
