@@ -277,6 +277,9 @@ def tiles_capture(tmp_path_factory):
     return capture, decode
 
 
+RING_STEP_DEG = 360 / 32  # the tiled capture's step between photos
+
+
 @pytest.mark.slow
 def test_tiled_room_poses_are_right_or_flagged(tiles_capture, tmp_path):
     from pipeline.alignment import compare_poses
@@ -295,8 +298,12 @@ def test_tiled_room_poses_are_right_or_flagged(tiles_capture, tmp_path):
     ref = np.stack([truth[c.name].c2w for c in cams.cameras])
     rotation_deg = compare_poses(est, ref, rotation_from="orientations").rotation_deg
     centre = compare_poses(est, ref).center / float(np.median(np.linalg.norm(ref[:, :3, 3], axis=1)))
-    # Every camera the stage keeps is right; a wrong one would have to be among those it dropped.
-    assert rotation_deg.max() < 2.0 and centre.max() < 0.05, (rotation_deg.max(), centre.max(), checks["flagged"])
+    # Every camera the stage keeps is in its place; a misplaced one would have to be among those it dropped. A
+    # photo registered where a look-alike was taken is off by at least the ring's step (360/32 = 11 degrees);
+    # the tiles cost precision, not places: 0.4 degrees median, single photos up to 2-3 (render to render).
+    assert np.median(rotation_deg) < 1.0, np.median(rotation_deg)
+    assert rotation_deg.max() < RING_STEP_DEG / 2 and centre.max() < 0.05, (rotation_deg.max(), centre.max(),
+                                                                           checks["flagged"])
     assert result.registered >= 0.75 * result.total
     assert set(checks["dropped"]) <= set(report["not_registered"])
     assert checks["up"]["angle_deg"] is None or checks["up"]["angle_deg"] < CONFIG.up_max_deg
