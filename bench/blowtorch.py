@@ -174,14 +174,16 @@ def pose_agreement(cameras: CameraSet, reference: CameraSet) -> dict[str, Any]:
 
 def reference_mask(path: Path, size: tuple[int, int]) -> np.ndarray:
     """``(H, W)`` bool reference mask at ``size`` (width, height): thresholded at the file's own size, then
-    area-averaged and taken where at least half object (a resized 0/255 mask can exceed 255 by rounding,
-    which a threshold after resizing mistakes for a 16-bit encoding)."""
+    area-averaged and taken where at least half object (the rule of every figure in bench/results; the
+    pipeline's reader, :func:`pipeline.mask_file.read_mask`, counts a pixel exactly half covered as background,
+    which moves the blowtorch's IoU by about 0.002)."""
     full = read_mask(path, Image.open(path).size)
     return cv2.resize(full.astype(np.float32), size, interpolation=cv2.INTER_AREA) >= HALF
 
 
-def masks_agreement(masks_dir: Path, dataset: Path = DATASET) -> dict[str, Any]:
-    """IoU of each mask of a masks stage folder with the reference mask of its photo resized to it.
+def masks_agreement(masks_dir: Path, reference: Path = DATASET / USER_MASKS) -> dict[str, Any]:
+    """IoU of each mask of a masks stage folder with the ``reference`` mask of its photo (``<name>.png``,
+    :func:`reference_mask` at our size).
 
     Returns:
         ``iou_median``, ``iou_mean``, ``iou_worst``, ``worst_view``, ``views`` and ``per_view``.
@@ -190,8 +192,7 @@ def masks_agreement(masks_dir: Path, dataset: Path = DATASET) -> dict[str, Any]:
     scores = {}
     for name in masks.names:
         ours = masks.mask(name)
-        h, w = ours.shape
-        scores[name] = iou(ours, reference_mask(dataset / USER_MASKS / f"{name}.png", (w, h)))
+        scores[name] = iou(ours, reference_mask(reference / f"{name}.png", ours.shape[::-1]))
     values = np.array(list(scores.values()))
     worst = min(scores, key=scores.get)
     return {"views": len(scores), "iou_median": float(np.median(values)), "iou_mean": float(values.mean()),
@@ -228,7 +229,7 @@ def score(results: Path, photos: Sequence[Path], dataset: Path = DATASET) -> dic
                                "unregistered": [n for n in names if n not in registered],
                                "poses": pose_agreement(cameras, reference_cameras(dataset))}
     if (results / MASKS).is_dir():
-        figures["masks"] = masks_agreement(results / MASKS, dataset)
+        figures["masks"] = masks_agreement(results / MASKS, dataset / USER_MASKS)
     return figures
 
 

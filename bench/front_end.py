@@ -38,13 +38,19 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run as a script: bench.blowtorch's shared helpers
 
-from bench.blowtorch import FRONT_END, ORCA, commit, machine, pose_agreement, run_front_end  # noqa: E402
+from bench.blowtorch import (  # noqa: E402
+    FRONT_END,
+    ORCA,
+    commit,
+    machine,
+    masks_agreement,
+    pose_agreement,
+    run_front_end,
+)
 from pipeline.cameras import CameraSet, load_cameras  # noqa: E402
 from pipeline.layout import CAMERAS_JSON, DECODE, GROUND_TRUTH, MASKS, POSES, SRGB  # noqa: E402
-from pipeline.mask_file import read_mask  # noqa: E402
-from pipeline.metrics import iou  # noqa: E402
-from pipeline.results import load_masks, load_poses  # noqa: E402
-from pipeline.sfm import quiet_colmap  # noqa: E402
+from pipeline.results import load_poses  # noqa: E402
+from pipeline.sfm import camera_to_world, largest_first, quiet_colmap  # noqa: E402
 from pipeline.signals import import_pycolmap  # noqa: E402
 from pipeline.synth.family import FRONT_END_SUITE, traits  # noqa: E402
 from pipeline.synth.scenes import get_scene  # noqa: E402
@@ -79,26 +85,8 @@ def plain_pycolmap(srgb: Path, work: Path) -> dict[str, np.ndarray]:
     models = pycolmap.incremental_mapping(db, srgb, work)
     if not models:
         return {}
-    best = max(models.values(), key=lambda r: r.num_reg_images())
-    out = {}
-    for image in best.images.values():
-        if image.has_pose:
-            w2c = image.cam_from_world().matrix()
-            c2w = np.eye(4)
-            c2w[:3, :3] = w2c[:3, :3].T
-            c2w[:3, 3] = -w2c[:3, :3].T @ w2c[:3, 3]
-            out[Path(image.name).stem] = c2w
-    return out
-
-
-def masks_iou(masks_dir: Path, truth: Path) -> dict[str, float]:
-    """IoU of each view's mask with the true mask (``truth/<name>.png``)."""
-    masks = load_masks(masks_dir)
-    scores = {}
-    for name in masks.names:
-        ours = masks.mask(name)
-        scores[name] = iou(ours, read_mask(truth / f"{name}.png", ours.shape[::-1]))
-    return scores
+    return {Path(image.name).stem: camera_to_world(image) for image in largest_first(models)[0].images.values()
+            if image.has_pose}
 
 
 def score_poses(cameras: CameraSet, truth: CameraSet) -> dict[str, Any]:
@@ -125,10 +113,7 @@ def run_scene(seed: int, cache: Path, work: Path, overrides: list[str], plain: b
         record["unregistered"] = sorted(set(names) - set(ours.by_name()))
         record["poses"] = score_poses(ours, truth)
     if runs.get(MASKS) is not None and not runs[MASKS].returncode:
-        scores = masks_iou(results / MASKS, capture / GROUND_TRUTH / MASKS)
-        values = np.array(list(scores.values()))
-        record["masks"] = {"iou_median": float(np.median(values)), "iou_worst": float(values.min()),
-                           "worst_view": min(scores, key=scores.get), "per_view": scores}
+        record["masks"] = masks_agreement(results / MASKS, capture / GROUND_TRUTH / MASKS)
     if plain and (results / DECODE / SRGB).is_dir():
         started = time.perf_counter()
         c2w = plain_pycolmap(results / DECODE / SRGB, results / "plain_pycolmap")

@@ -305,7 +305,7 @@ def run_sfm(
     mapper = "incremental" if config.mapper == "auto" else config.mapper
     if mapper == "incremental":
         models = pycolmap.incremental_mapping(db_path, image_dir, sparse, options, next_image_callback=next_image)
-        ranked = sorted(models.values(), key=lambda r: r.num_reg_images(), reverse=True)
+        ranked = largest_first(models)
     else:
         ranked = global_then_incremental(db_path, image_dir, sparse, config, options, threads, len(names))
     if config.mapper == "auto" and (not ranked or ranked[0].num_reg_images() < len(names)):
@@ -353,6 +353,11 @@ def _mapper_options(config: PosesConfig, groups: Sequence[CameraGroup], threads:
     return options
 
 
+def largest_first(models: dict[int, pycolmap.Reconstruction]) -> list[pycolmap.Reconstruction]:
+    """A mapper's models, the one with the most registered photos first."""
+    return sorted(models.values(), key=lambda r: r.num_reg_images(), reverse=True)
+
+
 def global_models(db_path: Path, image_dir: Path, out: Path, config: PosesConfig, threads: int,
                   n: int) -> dict[int, pycolmap.Reconstruction]:
     """Models of GLOMAP's global mapper (pycolmap.global_mapping) on a matched database, each without the photos
@@ -387,8 +392,7 @@ def global_then_incremental(db_path: Path, image_dir: Path, work: Path, config: 
     """The global mapper's models (:func:`global_models`), the largest :func:`continued` by the incremental
     mapper (``options``); largest first."""
     (work / "global").mkdir(parents=True)
-    found = sorted(global_models(db_path, image_dir, work / "global", config, threads, n).values(),
-                   key=lambda r: r.num_reg_images(), reverse=True)
+    found = largest_first(global_models(db_path, image_dir, work / "global", config, threads, n))
     return continued(db_path, image_dir, work / "continued", found[0], options) + found[1:] if found else []
 
 
@@ -405,8 +409,7 @@ def continued(db_path: Path, image_dir: Path, work: Path, rec: pycolmap.Reconstr
     start.mkdir(parents=True)
     out.mkdir()
     rec.write(start)
-    models = sorted(pycolmap.incremental_mapping(db_path, image_dir, out, options, input_path=start).values(),
-                    key=lambda r: r.num_reg_images(), reverse=True)
+    models = largest_first(pycolmap.incremental_mapping(db_path, image_dir, out, options, input_path=start))
     return models if models and models[0].num_reg_images() >= rec.num_reg_images() else [rec]
 
 
@@ -599,7 +602,7 @@ def posed_from_reconstruction(rec: pycolmap.Reconstruction, names: Sequence[str]
     (tracks of 3+ photos) and the model's figures added to ``stats``."""
     by_name = {stem_of(im.name): im for im in rec.images.values() if im.has_pose}
     posed_names = [n for n in names if n in by_name]
-    c2w = np.stack([_c2w(by_name[n]) for n in posed_names])
+    c2w = np.stack([camera_to_world(by_name[n]) for n in posed_names])
     lens = [rec.cameras[by_name[n].camera_id] for n in posed_names]
     reliable = [p for p in rec.points3D.values() if p.track.length() >= 3]
     points = np.array([p.xyz for p in reliable]).reshape(-1, 3)
@@ -630,10 +633,9 @@ def refine_without_object(rec: pycolmap.Reconstruction, posed: Posed, config: Po
     converge, or the framing guess is far too large) and nothing is changed. Changes ``rec`` in place.
     """
     pycolmap = import_pycolmap()
-    from .undistort import pinhole
+    from .undistort import pinholes
 
-    K = np.stack([pinhole(c) for c in posed.lens])
-    sizes = np.array([[c.width, c.height] for c in posed.lens], float)
+    K, sizes = pinholes(posed.lens)
     sphere = find_object(posed.c2w, K, sizes, points=posed.points, window=config.object_window,
                          margin=config.radius_margin, seed=config.seed)
     inside = [i for i, p in rec.points3D.items() if np.linalg.norm(p.xyz - sphere.center) < sphere.radius]
@@ -654,7 +656,7 @@ def refine_without_object(rec: pycolmap.Reconstruction, posed: Posed, config: Po
     return posed_from_reconstruction(rec, posed.names, stats)
 
 
-def _c2w(image: Any) -> np.ndarray:
+def camera_to_world(image: Any) -> np.ndarray:
     """``(4, 4)`` OpenCV camera-to-world of a posed pycolmap image (COLMAP stores world-to-camera)."""
     m = np.eye(4)
     m[:3] = image.cam_from_world().matrix()
@@ -744,12 +746,11 @@ def consecutive_matches(db_path: Path, order: Sequence[str]) -> np.ndarray:
 def checks_of(posed: Posed, db_path: Path, order: Sequence[str], order_by: str, config: PosesConfig) -> PoseChecks:
     """:func:`pipeline.pose_checks.check_poses` on the registered photos of one run (``order``: all photos'
     stems in capture order)."""
-    from .undistort import pinhole
+    from .undistort import pinholes
 
     index = {n: i for i, n in enumerate(posed.names)}
     registered = [n for n in order if n in index]
-    K = np.stack([pinhole(c) for c in posed.lens])
-    sizes = np.array([[c.width, c.height] for c in posed.lens], float)
+    K, sizes = pinholes(posed.lens)
     return check_poses(posed.names, posed.c2w, K, sizes, consecutive_matches(db_path, registered),
                        np.array([index[n] for n in registered], int), order_by, posed.points, config)
 

@@ -49,6 +49,12 @@ def pinhole(camera: Any) -> np.ndarray:
                      [0, camera.focal_length_y, camera.principal_point_y], [0, 0, 1]], np.float64)
 
 
+def pinholes(cameras: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
+    """``(N, 3, 3)`` pinhole parts and ``(N, 2)`` (width, height) of N COLMAP cameras."""
+    return (np.stack([pinhole(c) for c in cameras]),
+            np.array([[c.width, c.height] for c in cameras], float))
+
+
 def undistort_map(camera: Any) -> tuple[np.ndarray, np.ndarray, float]:
     """Maps from the pinhole image (same size, same fx, fy, cx, cy) to the distorted one, and the largest
     pixel shift. Project pixel convention in, cv2.remap's (pixel centres at integers) out."""

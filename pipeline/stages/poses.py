@@ -96,7 +96,7 @@ from ..sfm import (
     without_dropped,
 )
 from ..transforms import save_transforms
-from ..undistort import UndistortMaps, pinhole, undistort_mask, undistortion, write_undistorted
+from ..undistort import UndistortMaps, pinholes, undistort_mask, undistortion, write_undistorted
 
 log = logging.getLogger("orca.poses")
 
@@ -186,8 +186,7 @@ def run_poses(
             rel = os.path.relpath(decode_dir.resolve(), out_dir.resolve())
             image_of = {n: f"{rel}/{decoded.entry(n)[LINEAR]}" for n in posed.names}
 
-        K = np.stack([pinhole(c) for c in posed.lens])
-        sizes = np.array([[c.width, c.height] for c in posed.lens], float)
+        K, sizes = pinholes(posed.lens)
         hull, mask_scale = _hull_masks(mask_files, posed, undistort, (width, height)) if mask_files else (None, 1.0)
         sphere = find_object(
             posed.c2w, K, sizes, points=posed.points, masks=hull, mask_scale=mask_scale,
