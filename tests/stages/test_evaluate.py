@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import moved_cameras, orbit_cameras, rotation, write_untrained_train_dir
+from helpers import TINY_TRAIN, moved_cameras, orbit_cameras, rotation, write_untrained_train_dir
 
 from pipeline.alignment import Similarity
 from pipeline.cameras import CameraSet, save_cameras
@@ -192,13 +192,9 @@ def test_orca_evaluate_on_a_results_folder(tiny, tmp_path):
 
 # ------------------------------------------------------------------------------------------------- end to end
 
-TINY = [
-    "train.iterations=4", "train.batch_rays=64", "train.mask_warmup=2", "train.logging.checkpoint_every=4",
-    "train.logging.preview_every=4", "train.logging.preview_downscale=4", "train.logging.log_every=2",
-    "train.render.n_coarse=8", "train.render.n_fine=4", "train.render.env_samples=6", "train.sdf.hash_grid.levels=4",
-    "train.sdf.hash_grid.log2_table_size=10", "train.environment.hash_grid.log2_table_size=10", "train.sdf.hidden=16",
-    "train.environment.hidden=16", "train.device=cpu",
-]
+# Four steps, one checkpoint and one preview at the last.
+TINY = [*TINY_TRAIN, "train.iterations=4", "train.logging.checkpoint_every=4", "train.logging.preview_every=4",
+        "train.logging.log_every=2"]
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,7 @@ from html.parser import HTMLParser
 from pathlib import Path
 
 import pytest
-from helpers import png_data_uri_image
+from helpers import TINY_DAG, png_data_uri_image
 
 from pipeline.cli import main
 from pipeline.errors import InputError
@@ -18,16 +18,9 @@ from pipeline.layout import STAGES
 from pipeline.report.page import text
 from pipeline.stages.report import run_report
 
-TINY = [
-    "train.iterations=4", "train.batch_rays=64", "train.mask_warmup=2", "train.render.n_coarse=8",
-    "train.render.n_fine=4", "train.render.upsample_steps=1", "train.render.band_samples=4",
-    "train.render.env_samples=6", "train.sdf.hash_grid.levels=4", "train.sdf.hash_grid.log2_table_size=10",
-    "train.sdf.texture_grid.levels=2", "train.sdf.texture_grid.log2_table_size=10",
-    "train.environment.hash_grid.log2_table_size=10", "train.sdf.hidden=16", "train.environment.hidden=16",
-    "train.logging.log_every=1", "train.logging.preview_every=2", "train.device=cpu", "masks.hull_resolution=32",
-    "mesh.resolution=24", "export.view_size=8", "export.panorama_width=16", "export.video_frames=2",
-    "export.video_width=16", "export.video_height=12", "export.object_views=1", "export.object_downscale=4",
-]
+# The DAG's tiny settings, logged at every step, with a coarser hull and mesh.
+TINY = [*TINY_DAG, "train.logging.log_every=1", "train.logging.preview_every=2", "train.device=cpu",
+        "masks.hull_resolution=32", "mesh.resolution=24"]
 
 
 @pytest.fixture(scope="module")
