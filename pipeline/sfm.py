@@ -246,6 +246,9 @@ def run_sfm(
     extraction.num_threads = threads
     extraction.max_image_size = config.max_image_size or -1
     extraction.sift.max_num_features = config.max_num_features
+    # Images are imported before extraction because the extractor's threads number them in the order they
+    # finish, and the ids order the matching and mapping: two runs on the same photos could give different poses.
+    pycolmap.Database.open(db_path).close()
     for g in groups:
         reader = pycolmap.ImageReaderOptions()
         reader.camera_model = g.model
@@ -253,6 +256,7 @@ def run_sfm(
             reader.camera_params = ",".join(f"{p:.10g}" for p in g.params)  # also marks the focal as a prior
         if feature_masks is not None:
             reader.mask_path = str(feature_masks)
+        pycolmap.import_images(db_path, image_dir, pycolmap.CameraMode.SINGLE, [colmap_name(n) for n in g.names], reader)
         pycolmap.extract_features(
             db_path, image_dir, image_names=[colmap_name(n) for n in g.names], camera_mode=pycolmap.CameraMode.SINGLE,
             reader_options=reader, extraction_options=extraction, device=pycolmap.Device.auto,
