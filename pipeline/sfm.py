@@ -256,9 +256,10 @@ def run_sfm(
             reader.camera_params = ",".join(f"{p:.10g}" for p in g.params)  # also marks the focal as a prior
         if feature_masks is not None:
             reader.mask_path = str(feature_masks)
-        pycolmap.import_images(db_path, image_dir, pycolmap.CameraMode.SINGLE, [colmap_name(n) for n in g.names], reader)
+        colmap_names = [colmap_name(n) for n in g.names]
+        pycolmap.import_images(db_path, image_dir, pycolmap.CameraMode.SINGLE, colmap_names, reader)
         pycolmap.extract_features(
-            db_path, image_dir, image_names=[colmap_name(n) for n in g.names], camera_mode=pycolmap.CameraMode.SINGLE,
+            db_path, image_dir, image_names=colmap_names, camera_mode=pycolmap.CameraMode.SINGLE,
             reader_options=reader, extraction_options=extraction, device=pycolmap.Device.auto,
         )
     features = _feature_counts(db_path)
