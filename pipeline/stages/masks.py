@@ -159,7 +159,9 @@ def run_masks(
         if len(fixed) == len(views):
             log.info("every view has a user mask: the automatic method is skipped")
             final, plane, rounds = [fixed[i] for i in range(len(views))], None, []
-            prior = PriorSphere(np.zeros(3), 1.0, [])
+            # the hull is carved in a sphere: grown while the masks reach past it, or the object is cut
+            prior = find_prior_sphere(views, opts, lambda vs, o: final)
+            views = [in_sphere_frame(v, prior.centre, prior.radius) for v in views]
         else:
             probe = bar.add_task("sphere prior", total=None)
             prior = find_prior_sphere(views, opts, lambda vs, o: segment(vs, o, fixed=fixed).masks)
@@ -233,8 +235,9 @@ def run_masks(
         report = _report(records, agreement, (centre, radius, sphere is not None), config, plane, rounds, warnings,
                          scale, user_dir, time.time() - started)
         report["sphere_prior"] = {
-            "what": "the sphere segmentation ran in (poses frame): the poses stage's unit sphere, grown while the "
-            "probe's masks reached its outline (pipeline.masking.prior)",
+            "what": "the sphere segmentation and the hull ran in (poses frame): the poses stage's unit sphere, "
+            "grown while the probe's masks (the user's, when every view has one) reached its outline "
+            "(pipeline.masking.prior)",
             "centre": prior.centre.tolist(), "radius": prior.radius, "probes": prior.probes}
         write_json(tmp / MASKS_REPORT, report)
         inputs: dict[str, Path] = {CAMERAS_JSON: poses_dir / CAMERAS_JSON, DECODE_JSON: decoded.folder / DECODE_JSON}

@@ -71,6 +71,31 @@ def test_user_masks_of_every_encoding_override_on_the_tiny_capture(tiny_capture,
     assert all((tmp_path / "masks" / c.image).is_file() for c in cams.cameras)
 
 
+@pytest.mark.slow
+def test_user_masks_larger_than_the_poses_stage_sphere_give_the_whole_object(sfm_sphere_capture, sfm_sphere_decode,
+                                                                             tmp_path):
+    """The poses stage's sphere is a guess (here from a framing window far smaller than the object): the user's
+    masks reach past it, and the hull they are carved into must grow until it holds the whole object. The object's
+    sphere is then the one found from the default guess (same re-normalized cameras) and the masks agree with it."""
+    truth_dir = sfm_sphere_capture / "ground_truth" / "masks"
+    spheres = {}
+    for window in (None, 0.25):
+        shutil.copy(sfm_sphere_capture / "ground_truth" / "cameras.json", sfm_sphere_capture / "cameras.json")
+        config = PosesConfig(use_masks=False) if window is None else PosesConfig(use_masks=False, object_window=window)
+        try:
+            run_poses(sfm_sphere_capture, sfm_sphere_decode, tmp_path / f"poses_{window}", config)
+        finally:
+            (sfm_sphere_capture / "cameras.json").unlink()
+        run_masks(sfm_sphere_capture, tmp_path / f"poses_{window}", tmp_path / f"masks_{window}", MasksConfig(),
+                  user_masks_dir=truth_dir)
+        out = load_masks(tmp_path / f"masks_{window}")
+        assert out.report["agreement"]["median"] > 0.9, out.report["agreement"]
+        spheres[window] = (out.report, out.cameras().c2w())
+    small = spheres[0.25][0]["sphere_prior"]
+    assert small["radius"] > 1.0 and small["probes"][0]["touching_views"] > 0, small
+    np.testing.assert_allclose(spheres[0.25][1][:, :3, 3], spheres[None][1][:, :3, 3], atol=0.05)
+
+
 def test_user_masks_follow_the_poses_stage_undistortion(tiny_capture, tiny_decode, tmp_path):
     """A user draws on the photos; when the poses stage resampled them to pinhole, the masks must be resampled
     the same way, or they are off by the lens' shift (a few pixels towards the corners)."""
