@@ -101,7 +101,9 @@ def poses_inputs(wildcards):
     capture = CAPTURES_DIR / wildcards.capture
     found = {}
     for key, rel in (("calibration", layout.CALIBRATION), ("cameras", layout.CAMERAS_JSON),
-                     ("transforms", layout.TRANSFORMS_JSON), ("masks", layout.USER_MASKS)):
+                     ("transforms", layout.TRANSFORMS_JSON), ("llff", layout.POSES_BOUNDS),
+                     ("colmap", layout.SPARSE_MODEL), ("nerfstudio_colmap", layout.NERFSTUDIO_MODEL),
+                     ("masks", layout.USER_MASKS)):
         if (capture / rel).exists():
             found[key] = str(capture / rel)
     return found
@@ -148,7 +150,8 @@ rule decode:
 
 rule poses:
     """Decoded photos -> cameras.json in the object-centred unit-sphere frame (pycolmap SfM, or the capture's
-    own cameras.json / transforms.json), transforms.json, sparse/, poses_report.json, poses.png."""
+    own cameras.json / transforms.json / poses_bounds.npy / COLMAP model), transforms.json, sparse/0/ beside images/,
+    poses_report.json, poses.png."""
     input:
         unpack(poses_inputs),
         decode=out(layout.DECODE),

@@ -2,7 +2,8 @@
 and file name. Stages, the Snakefile and the loaders (:mod:`pipeline.results`) spell names only through here.
 
     captures/<capture>/             photos (or images/), capture.yaml, masks/, calibration/, cameras.json,
-                                    transforms.json or poses_bounds.npy (known cameras), ground_truth/ (synthetic)
+                                    transforms.json, poses_bounds.npy, sparse/0/ or colmap/sparse/0/ (known
+                                    cameras), ground_truth/ (synthetic)
     results/<capture>/<stage>/      one folder per stage, written atomically, each with manifest.json
 """
 
@@ -41,7 +42,10 @@ IMAGE_KINDS = LINEAR, SRGB, CLIPPED = ("linear", "srgb", "clipped")  # a folder 
 CAMERAS_JSON = "cameras.json"  # also a capture's known cameras, and masks' re-normalized cameras
 TRANSFORMS_JSON = "transforms.json"
 POSES_BOUNDS, LLFF_IMAGE_NAMES = "poses_bounds.npy", "all_image_names.txt"  # LLFF known cameras (pipeline.llff)
-SPARSE = "sparse"  # COLMAP binary model
+SPARSE = "sparse"  # COLMAP's folder of models; ours is its model "0" (SPARSE_MODEL), beside COLMAP_IMAGES
+SPARSE_MODEL = f"{SPARSE}/0"  # COLMAP binary model: cameras.bin, images.bin, points3D.bin (+ rigs, frames)
+COLMAP_IMAGES = "images"  # 8-bit PNGs named as in images.bin, where 3DGS, gsplat, nerfstudio, OpenMVS look
+NERFSTUDIO_MODEL = "colmap/sparse/0"  # a capture's COLMAP model as nerfstudio's ns-process-data lays it out
 SFM_DATABASE = "database.db"  # COLMAP's, kept with poses.keep_database
 UNDISTORTED = "undistorted"
 POSES_REPORT = "poses_report.json"

@@ -23,6 +23,7 @@ import numpy as np
 
 from .artifacts import read_stage_json, rerun_fix
 from .cameras import CameraSet, load_cameras
+from .colmap_model import model_folder
 from .errors import InputError
 from .imageio import read_exr, read_image
 from .layout import (
@@ -115,7 +116,8 @@ def load_decode(folder: str | Path) -> DecodeArtifacts:
 
 @dataclass(frozen=True)
 class PosesArtifacts:
-    """The poses stage's folder: ``cameras.json`` (normalized frame), ``poses_report.json``, ``sparse/``."""
+    """The poses stage's folder: ``cameras.json`` (normalized frame), ``poses_report.json``, ``sparse/0/`` beside
+    ``images/``."""
 
     folder: Path
 
@@ -128,10 +130,11 @@ class PosesArtifacts:
         return load_cameras(self.folder / CAMERAS_JSON)
 
     def reconstruction(self) -> Any:
-        """The COLMAP model (``pycolmap.Reconstruction``, COLMAP's frame); None for known cameras."""
+        """The COLMAP model (``pycolmap.Reconstruction``, COLMAP's frame; ``sparse/0``, or ``sparse`` as older
+        poses stages wrote it); None for known cameras other than a COLMAP model."""
         if not (self.folder / SPARSE).is_dir():
             return None
-        return import_pycolmap().Reconstruction(self.folder / SPARSE)
+        return import_pycolmap().Reconstruction(model_folder(self.folder / SPARSE))
 
 
 def load_poses(folder: str | Path) -> PosesArtifacts:

@@ -37,16 +37,17 @@ class SparsePoints:
 
 
 def load_sparse_points(sparse_dir: Path, cameras: CameraSet, min_track: int = 3) -> SparsePoints:
-    """The points of a COLMAP model (the poses stage's ``sparse/``) seen in at least ``min_track`` photos,
-    moved into the frame of ``cameras``: through its ``frame.to_colmap`` when it records one (the poses and
-    masks stages' cameras), else by the similarity between the model's camera centres and theirs (known or
-    ground-truth cameras of the same photos)."""
+    """The points of a COLMAP model (the poses stage's ``sparse/``, which holds it as ``0/``; or a model's own
+    folder) seen in at least ``min_track`` photos, moved into the frame of ``cameras``: through its
+    ``frame.to_colmap`` when it records one (the poses and masks stages' cameras), else by the similarity between
+    the model's camera centres and theirs (known or ground-truth cameras of the same photos)."""
+    from .colmap_model import model_folder
     from .sfm import stem_of
     from .signals import import_pycolmap
 
     pycolmap = import_pycolmap()
 
-    sparse_dir = Path(sparse_dir)
+    sparse_dir = model_folder(Path(sparse_dir))
     if not (sparse_dir / "points3D.bin").is_file() and not (sparse_dir / "points3D.txt").is_file():
         raise InputError("no COLMAP points3D here", sparse_dir, "pass the poses stage's sparse/ folder")
     try:

@@ -108,6 +108,47 @@ def orbit_cameras(n: int = 4, width: int = 24, height: int = 18, distance: float
     return CameraSet(cameras=cams)
 
 
+def colmap_model(cameras: CameraSet, folder: Path, *, lens: str = "PINHOLE", distortion: tuple[float, ...] = (),
+                 scale: float = 1.0, text: bool = False, image_name: str = "photos/{}.JPG", points: int = 30,
+                 seed: int = 0) -> Path:
+    """A COLMAP model of ``cameras`` written to ``folder`` as a user would bring it: images named ``image_name``
+    (a folder and another extension than the decoded photos'), cameras ``scale`` times the size (photos at full
+    size, decoded smaller), ``lens`` (PINHOLE, SIMPLE_RADIAL: k; OPENCV: k1, k2, p1, p2 in ``distortion``), and
+    ``points`` 3D points in a ball of radius 0.5 about the origin, each seen in every image where the lens puts
+    it. Text files are written without rigs and frames (COLMAP before 3.12)."""
+    from pipeline.signals import import_pycolmap
+
+    pycolmap = import_pycolmap()
+    rng = np.random.default_rng(seed)
+    xyz = rng.normal(size=(points, 3))
+    xyz *= 0.5 * rng.uniform(0, 1, (points, 1)) ** (1 / 3) / np.linalg.norm(xyz, axis=1, keepdims=True)
+    rec = pycolmap.Reconstruction()
+    for i, c in enumerate(cameras.cameras, 1):
+        f = [c.fx * scale] if lens == "SIMPLE_RADIAL" else [c.fx * scale, c.fy * scale]
+        cam = pycolmap.Camera(model=lens, width=round(c.width * scale), height=round(c.height * scale),
+                              params=[*f, c.cx * scale, c.cy * scale, *distortion], camera_id=i)
+        rec.add_camera_with_trivial_rig(cam)
+        w2c = np.linalg.inv(c.c2w)
+        xy = cam.img_from_cam(xyz @ w2c[:3, :3].T + w2c[:3, 3])
+        image = pycolmap.Image(name=image_name.format(c.name), camera_id=i, image_id=i,
+                               points2D=pycolmap.Point2DList([pycolmap.Point2D(p) for p in xy]))
+        rec.add_image_with_trivial_frame(image, pycolmap.Rigid3d(pycolmap.Rotation3d(w2c[:3, :3]), w2c[:3, 3]))
+    for k, x in enumerate(xyz):
+        track = pycolmap.Track()
+        for i in range(1, len(cameras) + 1):
+            track.add_element(i, k)
+        rec.add_point3D(x, track, np.full(3, 128, np.uint8))
+    rec.update_point_3d_errors()
+    folder.mkdir(parents=True)
+    if text:
+        rec.write_text(folder)
+        for f in ("rigs.txt", "frames.txt"):
+            (folder / f).unlink()
+    else:
+        rec.write(folder)
+    return folder
+
+
 def moved_cameras(cams: CameraSet, sim: Similarity) -> CameraSet:
     """The same cameras in the frame ``sim`` maps theirs to."""
     return CameraSet(cameras=[c.model_copy(update={"camera_to_world": sim.apply_c2w(c.c2w).tolist()})

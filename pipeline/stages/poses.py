@@ -5,9 +5,10 @@ the capture folder, where these are optional:
 
 - ``calibration/calibration.json`` (``orca calibrate``): OPENCV intrinsics, scaled to the decoded size and
   held fixed. Without it each lens/zoom shares one camera (:mod:`pipeline.sfm`).
-- ``cameras.json``, ``transforms.json`` or ``poses_bounds.npy`` (LLFF): known cameras
-  (:mod:`pipeline.known_cameras`). Then SfM is skipped (``poses.known_poses=ignore`` runs it anyway; refining
-  known cameras with SfM is not built).
+- ``cameras.json``, ``transforms.json``, ``poses_bounds.npy`` (LLFF) or a COLMAP model (``sparse/0/``, or
+  nerfstudio's ``colmap/sparse/0/``): known cameras (:mod:`pipeline.known_cameras`). Then SfM is skipped
+  (``poses.known_poses=ignore`` runs it anyway; refining known cameras with SfM is not built). A COLMAP model's
+  3D points are kept, as SfM's are.
 - ``masks/<name>.png`` (or ``--masks``; white = object): features on the glossy object are ignored (its
   reflections move with the viewpoint and make false matches), and the object's sphere is the masks'
   visual hull.
@@ -35,8 +36,10 @@ more than ``poses.undistort_threshold_px``, the decoded images are resampled to 
 lens at low resolution) the decoded images are used as they are and cameras.json points at them.
 
 Outputs (``out_dir``, written atomically): ``cameras.json``, ``transforms.json`` (nerfstudio, same frame),
-``sparse/`` (COLMAP binary model, COLMAP's frame; SfM only), ``poses_report.json``, ``poses.png`` (cameras
-around the object, top and side views), ``undistorted/`` (only if needed), ``manifest.json``.
+``sparse/0/`` (COLMAP binary model, COLMAP's frame; SfM's or the capture's COLMAP model, PINHOLE when the photos
+were undistorted) beside ``images/`` (8-bit PNGs named as in the model: the layout 3DGS, gsplat, nerfstudio and
+OpenMVS read, :mod:`pipeline.colmap_model`), ``poses_report.json``, ``poses.png`` (cameras around the object,
+top and side views), ``undistorted/`` (only if needed), ``manifest.json``.
 """
 
 from __future__ import annotations
@@ -58,9 +61,10 @@ from calibration import load_calibration
 from ..alignment import Similarity
 from ..artifacts import atomic_dir, write_json, write_manifest
 from ..cameras import CameraSet, save_cameras
+from ..colmap_model import model_files, write_dataset
 from ..config import PosesConfig, add_config_arguments, config_from_arguments
 from ..errors import InputError
-from ..known_cameras import find_known_cameras, posed_from_file
+from ..known_cameras import find_known_cameras, known_cameras
 from ..layout import (
     CALIBRATION,
     CAMERAS_JSON,
@@ -72,7 +76,7 @@ from ..layout import (
     POSES_FIGURE,
     POSES_REPORT,
     SFM_DATABASE,
-    SPARSE,
+    SRGB,
     TRANSFORMS_JSON,
     UNDISTORTED,
     USER_MASKS,
@@ -142,7 +146,9 @@ def run_poses(
     calibration = _calibration(capture_dir, width, height)
     inputs: dict[str, Path] = {DECODE_JSON: decode_dir / DECODE_JSON}
     for key, path in (("known_cameras", known_file), ("calibration", calibration[2] if calibration else None)):
-        if path is not None:
+        if path is not None and path.is_dir():  # a COLMAP model
+            inputs.update({f"{key}/{f.name}": f for f in model_files(path)})
+        elif path is not None:
             inputs[key] = path
     if (capture_dir / CAPTURE_YAML).is_file():
         inputs[CAPTURE_YAML] = capture_dir / CAPTURE_YAML
@@ -152,7 +158,7 @@ def run_poses(
         checks, checks_runs, suspects = None, [], {}  # pose checks: SfM only
         if known_file is not None:
             log.info("known cameras: %s (SfM skipped)", known_file)
-            posed = posed_from_file(known_file, names, width, height)
+            posed, reconstruction = known_cameras(known_file, names, width, height)
             source = str(known_file)
         else:
             duplicates = check_not_identical({n: thumbnail(decoded.srgb(n)) for n in names}, photo_dir)
@@ -166,8 +172,6 @@ def run_poses(
             reconstruction = without_dropped(sfm.reconstruction, posed.names)
             if config.object_points == "drop" and not mask_files:
                 posed = refine_without_object(reconstruction, posed, config)
-            (tmp / SPARSE).mkdir()
-            reconstruction.write(tmp / SPARSE)
             if config.keep_database:
                 shutil.move(str(sfm.work / SFM_DATABASE), str(tmp / SFM_DATABASE))
             for work in sfm.folders:
@@ -185,6 +189,10 @@ def run_poses(
         else:
             rel = os.path.relpath(decode_dir.resolve(), out_dir.resolve())
             image_of = {n: f"{rel}/{decoded.entry(n)[LINEAR]}" for n in posed.names}
+        if reconstruction is not None:
+            images = tmp / UNDISTORTED if undistort else decode_dir
+            write_dataset(reconstruction, tmp, {n: images / decoded.entry(n)[SRGB] for n in posed.names},
+                          pinhole=undistort is not None)
 
         K, sizes = pinholes(posed.lens)
         hull, mask_scale = _hull_masks(mask_files, posed, undistort, (width, height)) if mask_files else (None, 1.0)
@@ -337,11 +345,12 @@ examples:
   orca poses captures/mug --set matcher=sequential --set num_threads=4
   orca poses captures/mug --set min_registered_fraction=0.5 --preset fast
 
-Known cameras: put cameras.json (orca schema), transforms.json (nerfstudio) or poses_bounds.npy (LLFF, with
-all_image_names.txt naming its rows when it has more than the photos) in the capture folder; SfM is
-then skipped (--set known_poses=ignore runs it anyway). A calibration from `orca calibrate` in
-CAPTURE/calibration/calibration.json fixes the intrinsics. Output: cameras.json (normalized frame: the object
-in the unit sphere), transforms.json, sparse/ (COLMAP model), poses_report.json, poses.png, and undistorted/
+Known cameras: put cameras.json (orca schema), transforms.json (nerfstudio), poses_bounds.npy (LLFF, with
+all_image_names.txt naming its rows when it has more than the photos) or a COLMAP model (sparse/0/ or
+colmap/sparse/0/, .bin or .txt) in the capture folder; SfM is then skipped (--set known_poses=ignore runs it
+anyway). A calibration from `orca calibrate` in CAPTURE/calibration/calibration.json fixes the intrinsics.
+Output: cameras.json (normalized frame: the object in the unit sphere), transforms.json, sparse/0/ (COLMAP
+model) beside images/ (train 3DGS/gsplat on the poses folder), poses_report.json, poses.png, and undistorted/
 (a decode-style folder for `orca train --decode`) when the lens distorts.
 """
 

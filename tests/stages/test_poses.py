@@ -1,5 +1,6 @@
 """The poses stage: SfM on synthetic captures against their ground truth, real photos (fountain-P11), known
-cameras (transforms.json / cameras.json), undistortion, and the messages for captures SfM cannot solve."""
+cameras (transforms.json / cameras.json / a COLMAP model), undistortion, our COLMAP model where other tools look
+for it, and the messages for captures SfM cannot solve."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import TESTDATA
+from helpers import TESTDATA, colmap_model
 
 from pipeline.alignment import compare_poses
 from pipeline.artifacts import read_json
@@ -50,6 +51,21 @@ def errors_against_truth(cameras: CameraSet, truth: CameraSet) -> dict[str, floa
         "object_centre_offset": float(np.linalg.norm(centre)),
         "true_radius_normalized": 1.0 / by_centres.similarity.scale,
     }
+
+
+def assert_colmap_dataset(out: Path) -> None:
+    """``out/sparse/0`` (binary) holds the registered photos, each image name an 8-bit image of the camera's size
+    in ``out/images`` (what 3DGS, gsplat and nerfstudio read)."""
+    from pipeline.imageio import read_image
+    from pipeline.results import load_poses
+
+    for f in ("cameras.bin", "images.bin", "points3D.bin"):
+        assert (out / "sparse" / "0" / f).is_file(), f
+    rec, cams = load_poses(out).reconstruction(), load_poses(out).cameras()
+    assert sorted(Path(im.name).stem for im in rec.images.values()) == sorted(c.name for c in cams.cameras)
+    for image in rec.images.values():
+        stored, cam = read_image(out / "images" / image.name), rec.cameras[image.camera_id]
+        assert stored.dtype == np.uint8 and stored.shape == (cam.height, cam.width, 3), image.name
 
 
 def assert_no_output(out: Path) -> None:
@@ -131,6 +147,80 @@ def test_known_cameras_with_lens_distortion_are_undistorted(tiny_capture, tiny_d
     assert und.clipped(name)[0, 0]  # a corner the lens never saw: marked clipped, so training ignores it
 
 
+def _same_cameras_in_the_files_frame(cameras: CameraSet, truth: CameraSet, atol: float) -> None:
+    to_file = np.asarray(cameras.frame.to_colmap)
+    scale = np.cbrt(np.linalg.det(to_file[:3, :3]))
+    assert [c.name for c in cameras.cameras] == [c.name for c in truth.cameras]
+    for a, b in zip(truth.cameras, cameras.cameras):
+        np.testing.assert_allclose(b.K, a.K, atol=atol)
+        back = to_file @ b.c2w
+        back[:3, :3] /= scale
+        np.testing.assert_allclose(back, a.c2w, atol=atol)
+
+
+@pytest.mark.parametrize("where,text", [("sparse/0", False), ("colmap/sparse/0", True)], ids=["colmap-bin",
+                                                                                              "nerfstudio-txt"])
+def test_a_users_colmap_model_skips_sfm_and_ours_round_trips(tiny_capture, tiny_decode, tmp_path, where, text):
+    """A capture's COLMAP model (COLMAP's sparse/0, binary; nerfstudio's colmap/sparse/0, text) of photos twice
+    the decoded size: the same cameras at the decoded size, its 3D points kept for sparse depth, and our
+    sparse/0 + images/; that, given back as a user's model, gives the same cameras again."""
+    from pipeline.results import load_poses
+    from pipeline.sparse_depth import load_sparse_points
+
+    truth = load_cameras(tiny_capture / "ground_truth" / "cameras.json")
+    capture = tmp_path / "capture"
+    colmap_model(truth, capture / where, scale=2.0, text=text)
+    result = run(capture, tiny_decode, tmp_path / "poses")
+    assert result.source == str(capture / where) and result.registered == len(truth) and not result.undistorted
+    _same_cameras_in_the_files_frame(result.cameras, truth, 1e-9)
+    report = read_json(tmp_path / "poses" / "poses_report.json")
+    assert report["points3D"] == 30 and report["mean_reprojection_error_px"] < 1e-6
+    assert_colmap_dataset(tmp_path / "poses")
+    points = load_sparse_points(tmp_path / "poses" / "sparse", load_poses(tmp_path / "poses").cameras())
+    assert len(points.xyz) == 30
+
+    again = tmp_path / "again"
+    shutil.copytree(tmp_path / "poses" / "sparse", again / "sparse")
+    result = run(again, tiny_decode, tmp_path / "poses_again")
+    assert result.source == str(again / "sparse" / "0") and not result.undistorted
+    _same_cameras_in_the_files_frame(result.cameras, truth, 1e-6)
+    assert_colmap_dataset(tmp_path / "poses_again")
+
+
+def test_a_users_distorted_colmap_model_is_written_pinhole_for_the_undistorted_photos(tiny_capture, tiny_decode,
+                                                                                       tmp_path):
+    """An OPENCV model whose lens moves pixels: the photos are undistorted, and our sparse/0 holds their PINHOLE
+    cameras (cameras.json's intrinsics) with its 2D points where those cameras project its 3D points, beside
+    images/ holding the undistorted photos; given back, it needs no undistortion and gives the same cameras."""
+    from pipeline.results import load_poses
+
+    truth = load_cameras(tiny_capture / "ground_truth" / "cameras.json")
+    capture = tmp_path / "capture"
+    colmap_model(truth, capture / "sparse" / "0", lens="OPENCV", distortion=(0.2, 0.02, 0.0, 0.0))
+    out = tmp_path / "poses"
+    result = run(capture, tiny_decode, out)
+    assert result.undistorted
+    assert_colmap_dataset(out)
+    rec, cams = load_poses(out).reconstruction(), load_poses(out).cameras().by_name()
+    errors = []
+    for image in rec.images.values():
+        cam, name = rec.cameras[image.camera_id], Path(image.name).stem
+        assert cam.model.name == "PINHOLE"
+        np.testing.assert_allclose(cam.calibration_matrix(), cams[name].K, atol=1e-9)
+        assert (out / "images" / image.name).read_bytes() == (out / "undistorted" / "srgb" / image.name).read_bytes()
+        w2c = image.cam_from_world().matrix()
+        for p in image.points2D:
+            x = w2c[:, :3] @ rec.points3D[p.point3D_id].xyz + w2c[:, 3]
+            errors.append(np.linalg.norm(cams[name].K[:2, :2] @ (x[:2] / x[2]) + cams[name].K[:2, 2] - p.xy))
+    assert len(errors) == len(truth) * 30 and max(errors) < 1e-6, max(errors)
+
+    again = tmp_path / "again"
+    shutil.copytree(out / "sparse", again / "sparse")
+    result = run(again, tiny_decode, tmp_path / "poses_again")
+    assert not result.undistorted
+    _same_cameras_in_the_files_frame(result.cameras, truth, 1e-6)
+
+
 def test_known_cameras_that_match_no_photo_are_refused(tiny_capture, tiny_decode, tmp_path):
     truth = load_cameras(tiny_capture / "ground_truth" / "cameras.json")
     renamed = CameraSet(cameras=[c.model_copy(update={"name": f"other_{c.name}"}) for c in truth.cameras])
@@ -158,9 +248,9 @@ def test_sphere_capture_registers_every_view_accurately(sfm_sphere_capture, sfm_
     assert err["object_centre_offset"] <= 0.02, err
     assert 0.4 < err["true_radius_normalized"] <= 1.0, err  # the object fits in the unit sphere, not lost in it
 
-    for f in ("cameras.json", "transforms.json", "poses_report.json", "poses.png", "manifest.json",
-              "sparse/images.bin", "sparse/points3D.bin"):
+    for f in ("cameras.json", "transforms.json", "poses_report.json", "poses.png", "manifest.json"):
         assert (out / f).is_file(), f
+    assert_colmap_dataset(out)
     assert not (out / "work").exists() and not (out / "database.db").exists()
     report = read_json(out / "poses_report.json")
     assert report["registered"] == 20 and report["models"] == [20] and report["matcher"] == "exhaustive"
