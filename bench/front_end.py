@@ -4,6 +4,7 @@ poses and masks setting, measured on a distribution of scenes rather than one.
     python bench/front_end.py                          # FRONT_END_SUITE, captures cached in /tmp/orca_front_end
     python bench/front_end.py --seeds 0 4 --set poses.mapper=incremental
     python bench/front_end.py --no-plain               # skip the plain-pycolmap baseline
+    python bench/front_end.py --known-poses            # masks alone: the true cameras as known cameras, no SfM
 
 Each seed of :data:`pipeline.synth.family.FRONT_END_SUITE` is rendered once (``orca synth random-<seed>
 --truth front_end``, 40 photos at 320x240; cached in ``--cache``, rendered again only when missing), then
@@ -94,14 +95,27 @@ def score_poses(cameras: CameraSet, truth: CameraSet) -> dict[str, Any]:
     return {k: v for k, v in figures.items() if k != "per_camera"}
 
 
+def with_known_cameras(capture: Path, folder: Path) -> Path:
+    """A capture folder of symlinks to ``capture``'s files, with its true cameras as the capture's known
+    cameras (``cameras.json``), which the poses stage then uses instead of SfM. ``folder`` must not exist."""
+    folder.mkdir(parents=True)
+    for p in capture.iterdir():
+        (folder / p.name).symlink_to(p.resolve())
+    shutil.copy(capture / GROUND_TRUTH / CAMERAS_JSON, folder / CAMERAS_JSON)
+    return folder
+
+
 def run_scene(seed: int, cache: Path, work: Path, overrides: list[str], plain: bool,
-              stages: tuple[str, ...] = FRONT_END) -> dict[str, Any]:
+              stages: tuple[str, ...] = FRONT_END, known_poses: bool = False) -> dict[str, Any]:
     capture = render(seed, cache)
     truth = load_cameras(capture / GROUND_TRUTH / CAMERAS_JSON)
+    if known_poses:
+        capture = with_known_cameras(capture, work / "captures" / f"random-{seed}")
     results = work / f"random-{seed}"
     runs = run_front_end(capture, results, [*BENCH_OVERRIDES, *overrides], stages)
     names = [c.name for c in truth.cameras]
     record: dict[str, Any] = {"seed": seed, "traits": traits(get_scene(f"random-{seed}")), "photos": len(names),
+                              "known_poses": known_poses,
                               "stages": {s: {"seconds": round(r.seconds, 1), "peak_rss_mb": round(r.peak_rss_mb),
                                              "returncode": r.returncode} for s, r in runs.items()}}
     failed = [r for r in runs.values() if r.returncode]
@@ -114,7 +128,7 @@ def run_scene(seed: int, cache: Path, work: Path, overrides: list[str], plain: b
         record["poses"] = score_poses(ours, truth)
     if runs.get(MASKS) is not None and not runs[MASKS].returncode:
         record["masks"] = masks_agreement(results / MASKS, capture / GROUND_TRUTH / MASKS)
-    if plain and (results / DECODE / SRGB).is_dir():
+    if plain and not known_poses and (results / DECODE / SRGB).is_dir():
         started = time.perf_counter()
         c2w = plain_pycolmap(results / DECODE / SRGB, results / "plain_pycolmap")
         record["plain"] = {"registered": len(c2w), "seconds": round(time.perf_counter() - started, 1)}
@@ -179,6 +193,8 @@ def main() -> None:
     parser.add_argument("--no-plain", action="store_true", help="skip the plain-pycolmap baseline")
     parser.add_argument("--until", choices=FRONT_END[1:], default=FRONT_END[-1],
                         help="the last stage run (poses: no masks)")
+    parser.add_argument("--known-poses", action="store_true",
+                        help="give each capture its true cameras (no SfM): measures the masks on their own")
     parser.add_argument("--results", type=Path, default=RESULTS)
     parser.add_argument("--no-record", action="store_true", help="append nothing")
     args = parser.parse_args()
@@ -192,7 +208,8 @@ def main() -> None:
     try:
         for seed in args.seeds:
             stages = FRONT_END[:FRONT_END.index(args.until) + 1]
-            records.append(run_scene(seed, args.cache, work, args.overrides, not args.no_plain, stages))
+            records.append(run_scene(seed, args.cache, work, args.overrides, not args.no_plain, stages,
+                                     args.known_poses))
             print(table(records[-1:], summary(records)), flush=True)
     finally:
         if args.work is None:
@@ -201,7 +218,7 @@ def main() -> None:
     print("\n" + table(records, total))
     record = {"date": time.strftime("%Y-%m-%dT%H:%M:%S"), "machine": machine(), "commit": commit(),
               "settings": {"seeds": args.seeds, "render": list(RENDER), "overrides": args.overrides,
-                           "until": args.until},
+                           "until": args.until, "known_poses": args.known_poses},
               "seconds": round(time.perf_counter() - started), "suite": total,
               "scenes": [{k: ({f: v for f, v in r[k].items() if f != "per_view"} if k == "masks" else r[k])
                           for k in r} for r in records]}
