@@ -1,12 +1,15 @@
 """COLMAP models in and out: a user's model read (as known cameras), ours written where other tools look.
 
 Layout: COLMAP's mapper writes one model per folder of ``sparse/`` (``sparse/0``, ``sparse/1``, ...); 3D Gaussian
-splatting, gsplat, nerfstudio's colmap dataparser and OpenMVS read ``sparse/0`` beside an ``images/`` folder that
-holds each image under the name ``images.bin`` gives it. The poses stage writes that (:func:`write_dataset`),
-8-bit PNGs in ``images/``; readers here take ``sparse/`` or ``sparse/0`` alike (:func:`model_folder`).
+splatting, gsplat and nerfstudio's colmap dataparser read ``sparse/0`` beside an ``images/`` folder that holds each
+image under the name ``images.bin`` gives it. The poses stage writes that (:func:`write_dataset`), 8-bit PNGs in
+``images/``; readers here take ``sparse/`` or ``sparse/0`` alike (:func:`model_folder`).
 
-Undistorted photos: what COLMAP's image_undistorter gives, PINHOLE cameras and the 2D points moved with the
-images (:func:`to_pinhole`); ours keep the photos' size and focal length (:mod:`pipeline.undistort`).
+Cameras: those of ``cameras.json``, PINHOLE, with the 2D points moved to where the pinhole camera sees them
+(:func:`to_pinhole`): what COLMAP's image_undistorter gives (ours keeps the photos' size and focal length,
+:mod:`pipeline.undistort`), and what 3D Gaussian splatting requires. ``images/`` then holds the undistorted
+photos, or the photos as decoded where the lens moves no pixel by more than ``poses.undistort_threshold_px``
+(which cameras.json treats as pinhole too).
 
 Pixel convention: COLMAP's, (0, 0) the top-left corner of the image, so scaling an image scales its points.
 """
@@ -102,17 +105,15 @@ def to_pinhole(rec: pycolmap.Reconstruction) -> None:
     rec.update_point_3d_errors()
 
 
-def write_dataset(rec: pycolmap.Reconstruction, folder: Path, images: Mapping[str, Path], *,
-                  pinhole: bool) -> None:
-    """``rec`` as ``folder/sparse/0`` (binary) beside ``folder/images/``: each registered image renamed to the
-    file name of its photo's 8-bit image in ``images`` (by photo name: the image name's stem), which is linked
-    there (copied where the file system cannot link). ``pinhole``: the images are the undistorted photos, and
-    the model is made their PINHOLE cameras (:func:`to_pinhole`). ``rec`` itself is not changed."""
+def write_dataset(rec: pycolmap.Reconstruction, folder: Path, images: Mapping[str, Path]) -> None:
+    """``rec`` with PINHOLE cameras (:func:`to_pinhole`) as ``folder/sparse/0`` (binary) beside ``folder/images/``:
+    each registered image renamed to the file name of its photo's 8-bit pinhole image in ``images`` (by photo
+    name: the image name's stem), which is linked there (copied where the file system cannot link). ``rec``
+    itself is not changed."""
     from .sfm import stem_of
 
     rec = import_pycolmap().Reconstruction(rec)
-    if pinhole:
-        to_pinhole(rec)
+    to_pinhole(rec)
     (folder / SPARSE_MODEL).mkdir(parents=True)
     (folder / COLMAP_IMAGES).mkdir()
     for i in rec.reg_image_ids():

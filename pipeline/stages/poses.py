@@ -36,10 +36,10 @@ more than ``poses.undistort_threshold_px``, the decoded images are resampled to 
 lens at low resolution) the decoded images are used as they are and cameras.json points at them.
 
 Outputs (``out_dir``, written atomically): ``cameras.json``, ``transforms.json`` (nerfstudio, same frame),
-``sparse/0/`` (COLMAP binary model, COLMAP's frame; SfM's or the capture's COLMAP model, PINHOLE when the photos
-were undistorted) beside ``images/`` (8-bit PNGs named as in the model: the layout 3DGS, gsplat, nerfstudio and
-OpenMVS read, :mod:`pipeline.colmap_model`), ``poses_report.json``, ``poses.png`` (cameras around the object,
-top and side views), ``undistorted/`` (only if needed), ``manifest.json``.
+``sparse/0/`` (COLMAP binary model, COLMAP's frame; SfM's or the capture's COLMAP model with cameras.json's
+PINHOLE cameras) beside ``images/`` (8-bit PNGs named as in the model, undistorted where the photos were: the
+layout 3DGS, gsplat and nerfstudio read, :mod:`pipeline.colmap_model`), ``poses_report.json``, ``poses.png``
+(cameras around the object, top and side views), ``undistorted/`` (only if needed), ``manifest.json``.
 """
 
 from __future__ import annotations
@@ -191,8 +191,7 @@ def run_poses(
             image_of = {n: f"{rel}/{decoded.entry(n)[LINEAR]}" for n in posed.names}
         if reconstruction is not None:
             images = tmp / UNDISTORTED if undistort else decode_dir
-            write_dataset(reconstruction, tmp, {n: images / decoded.entry(n)[SRGB] for n in posed.names},
-                          pinhole=undistort is not None)
+            write_dataset(reconstruction, tmp, {n: images / decoded.entry(n)[SRGB] for n in posed.names})
 
         K, sizes = pinholes(posed.lens)
         hull, mask_scale = _hull_masks(mask_files, posed, undistort, (width, height)) if mask_files else (None, 1.0)

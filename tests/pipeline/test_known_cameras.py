@@ -129,8 +129,8 @@ def test_a_colmap_model_unreadable_or_of_other_photos_is_refused_with_the_fix(tm
         known_cameras(colmap_model(cams, tmp_path / "rotated"), ["view0", "view1"], 18, 24)
 
 
-def test_our_model_of_undistorted_photos_is_pinhole_with_the_2d_points_moved(tmp_path):
-    """An OPENCV model written for undistorted photos: PINHOLE cameras with the lens's focal lengths and principal
+def test_our_model_is_pinhole_with_the_2d_points_moved(tmp_path):
+    """An OPENCV model written for the undistorted photos: PINHOLE cameras with the lens's focal lengths and principal
     point, every 2D point where the pinhole camera projects its 3D point (as COLMAP's image_undistorter gives), each
     image name an 8-bit image in images/ beside sparse/; the model given is left as it was."""
     from pipeline import imageio
@@ -143,7 +143,7 @@ def test_our_model_of_undistorted_photos_is_pinhole_with_the_2d_points_moved(tmp
     posed, rec = known_cameras(user, names, 64, 48)
     (tmp_path / "srgb").mkdir()
     pngs = {n: imageio.write_png(tmp_path / "srgb" / f"{n}.png", np.zeros((48, 64, 3), np.uint8)) for n in names}
-    write_dataset(rec, tmp_path / "out", pngs, pinhole=True)
+    write_dataset(rec, tmp_path / "out", pngs)
     assert {c.model.name for c in rec.cameras.values()} == {"OPENCV"}
     ours = import_pycolmap().Reconstruction(tmp_path / "out" / "sparse" / "0")
     truth = cams.by_name()
@@ -159,3 +159,16 @@ def test_our_model_of_undistorted_photos_is_pinhole_with_the_2d_points_moved(tmp
             x = w2c[:3, :3] @ ours.points3D[p.point3D_id].xyz + w2c[:3, 3]
             errors.append(np.linalg.norm(c.K[:2, :2] @ (x[:2] / x[2]) + c.K[:2, 2] - p.xy))
     assert len(errors) == 4 * 30 and max(errors) < 1e-6, max(errors)
+
+
+def test_sparse_points_are_read_from_sparse_0_and_from_an_older_poses_stages_sparse(tmp_path):
+    """`orca train --points results/<name>/poses/sparse` reads the model in sparse/0, and in sparse/ itself
+    (where poses stages before sparse/0 wrote it)."""
+    from pipeline.sparse_depth import load_sparse_points
+
+    cams = orbit_cameras()
+    colmap_model(cams, tmp_path / "new" / "sparse" / "0")
+    colmap_model(cams, tmp_path / "old" / "sparse")
+    for layout in ("new", "old"):
+        points = load_sparse_points(tmp_path / layout / "sparse", cams)
+        assert len(points.xyz) == 30 and all(len(o) == 4 for o in points.observers), layout

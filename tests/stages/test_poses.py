@@ -54,8 +54,8 @@ def errors_against_truth(cameras: CameraSet, truth: CameraSet) -> dict[str, floa
 
 
 def assert_colmap_dataset(out: Path) -> None:
-    """``out/sparse/0`` (binary) holds the registered photos, each image name an 8-bit image of the camera's size
-    in ``out/images`` (what 3DGS, gsplat and nerfstudio read)."""
+    """``out/sparse/0`` (binary) holds the registered photos with cameras.json's PINHOLE intrinsics, each image
+    name an 8-bit image of the camera's size in ``out/images`` (what 3DGS, gsplat and nerfstudio read)."""
     from pipeline.imageio import read_image
     from pipeline.results import load_poses
 
@@ -66,6 +66,8 @@ def assert_colmap_dataset(out: Path) -> None:
     for image in rec.images.values():
         stored, cam = read_image(out / "images" / image.name), rec.cameras[image.camera_id]
         assert stored.dtype == np.uint8 and stored.shape == (cam.height, cam.width, 3), image.name
+        assert cam.model.name == "PINHOLE"
+        np.testing.assert_allclose(cam.calibration_matrix(), cams.by_name()[Path(image.name).stem].K, atol=1e-9)
 
 
 def assert_no_output(out: Path) -> None:
@@ -204,9 +206,7 @@ def test_a_users_distorted_colmap_model_is_written_pinhole_for_the_undistorted_p
     rec, cams = load_poses(out).reconstruction(), load_poses(out).cameras().by_name()
     errors = []
     for image in rec.images.values():
-        cam, name = rec.cameras[image.camera_id], Path(image.name).stem
-        assert cam.model.name == "PINHOLE"
-        np.testing.assert_allclose(cam.calibration_matrix(), cams[name].K, atol=1e-9)
+        name = Path(image.name).stem
         assert (out / "images" / image.name).read_bytes() == (out / "undistorted" / "srgb" / image.name).read_bytes()
         w2c = image.cam_from_world().matrix()
         for p in image.points2D:
