@@ -41,13 +41,22 @@ def find_known_cameras(capture_dir: Path, known_poses: str) -> Path | None:
     """The capture's known-cameras file or COLMAP model folder, or None (none, or ``known_poses="ignore"``: SfM
     runs anyway).
 
+    A ``poses_bounds.npy`` beside a COLMAP model is taken as made from it (LLFF's layout): the model is used.
+
     Raises:
         InputError: the capture has more than one of them.
     """
     found = [capture_dir / f for f in KNOWN_CAMERA_FILES if (capture_dir / f).is_file()]
-    found += [capture_dir / m for m in KNOWN_COLMAP_MODELS if (capture_dir / m).is_dir()]
-    if known_poses == "ignore" or not found:
+    models = [capture_dir / m for m in KNOWN_COLMAP_MODELS if (capture_dir / m).is_dir()]
+    if known_poses == "ignore" or not found + models:
         return None
+    if models and capture_dir / POSES_BOUNDS in found:
+        # LLFF's imgs2poses writes poses_bounds.npy from the sparse/0 beside it (every LLFF dataset ships both):
+        # one source, and the model is the richer copy (lens model, 3D points)
+        log.info("%s beside %s: the COLMAP model it was made from is used", POSES_BOUNDS,
+                 models[0].relative_to(capture_dir))
+        found.remove(capture_dir / POSES_BOUNDS)
+    found += models
     if len(found) > 1:
         raise InputError(
             f"the capture has {' and '.join(str(p.relative_to(capture_dir)) for p in found)}: which cameras are "

@@ -83,6 +83,14 @@ def test_a_colmap_model_is_found_where_colmap_and_nerfstudio_put_it_and_two_are_
     save_cameras(tmp_path / "cameras.json", cams)
     with pytest.raises(InputError, match="cameras.json and colmap/sparse/0: which cameras"):
         find_known_cameras(tmp_path, "auto")
+    # LLFF's layout: poses_bounds.npy made from the sparse/0 beside it is one source, the model is read
+    (tmp_path / "cameras.json").unlink()
+    shutil.rmtree(tmp_path / "colmap")
+    colmap_model(cams, tmp_path / "sparse" / "0")
+    save_poses_bounds(tmp_path / "poses_bounds.npy", cams, np.tile([[1.0, 10.0]], (len(cams), 1)))
+    assert find_known_cameras(tmp_path, "auto") == tmp_path / "sparse" / "0"
+    shutil.rmtree(tmp_path / "sparse")
+    assert find_known_cameras(tmp_path, "auto") == tmp_path / "poses_bounds.npy"
 
 
 @pytest.mark.parametrize("text", [False, True], ids=["bin", "txt"])
