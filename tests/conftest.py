@@ -35,6 +35,46 @@ def tiny_decode(tiny_capture, tmp_path_factory) -> Path:
     return out
 
 
+# The DAG's tiny settings, logged at every step, with a coarser hull and mesh.
+TINY_RESULTS = ["train.logging.log_every=1", "train.logging.preview_every=2", "train.device=cpu",
+                "masks.hull_resolution=32", "mesh.resolution=24"]
+
+
+@pytest.fixture(scope="session")
+def tiny_results(tiny_capture, tmp_path_factory) -> Path:
+    """``results/tiny/`` with every stage's folder but the report's, made by the stages themselves through the
+    `orca` CLI: decode, poses (the capture's known cameras), masks (its own masks), a few training steps, mesh,
+    export and evaluate (~15 s). Tests that change it work on a copy."""
+    import shutil
+
+    from helpers import TINY_DAG
+
+    from pipeline.cli import main
+
+    capture = tmp_path_factory.mktemp("results_capture") / "tiny"
+    shutil.copytree(tiny_capture, capture)
+    shutil.copy(capture / "ground_truth" / "cameras.json", capture / "cameras.json")
+    shutil.copytree(capture / "ground_truth" / "masks", capture / "masks")
+    out = tmp_path_factory.mktemp("results") / "tiny"
+    sets = [a for s in [*TINY_DAG, *TINY_RESULTS] for a in ("--set", s)]
+    cams = str(out / "masks" / "cameras.json")
+    for argv in (
+        ["decode", str(capture), "--out", str(out / "decode")],
+        ["poses", str(capture), "--decode", str(out / "decode"), "--out", str(out / "poses")],
+        ["masks", str(capture), "--poses", str(out / "poses"), "--decode", str(out / "decode"), "--out",
+         str(out / "masks")],
+        ["train", "--decode", str(out / "decode"), "--cameras", cams, "--masks", str(out / "masks" / "masks"),
+         "--capture", str(capture), "--out", str(out / "train")],
+        ["mesh", str(out / "train"), "--cameras", cams, "--out", str(out / "mesh"), "--device", "cpu"],
+        ["export", str(out / "train"), "--cameras", cams, "--out", str(out / "export"), "--device", "cpu"],
+    ):
+        assert main([*argv, "--preset", "fast", *sets]) == 0, argv[0]
+    assert main(["evaluate", str(out / "train"), "--ground-truth", str(capture / "ground_truth"), "--cameras", cams,
+                 "--mesh", str(out / "mesh" / "mesh.ply"), "--out", str(out / "evaluate"), "--views", "1",
+                 "--downscale", "2", "--device", "cpu"]) == 0
+    return out
+
+
 @pytest.fixture
 def float64():
     """Run a test with float64 as torch's default dtype, restoring the previous default afterwards

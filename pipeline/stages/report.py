@@ -37,33 +37,13 @@ from pathlib import Path
 from typing import Any
 
 from ..artifacts import atomic_dir, write_manifest
-from ..errors import InputError
-from ..layout import MANIFEST, REPORT, REPORT_HTML, RESULTS, STAGES
+from ..layout import REPORT, REPORT_HTML, STAGES
 from ..report import page
 from ..report.reader import Reader
 from ..report.sections import section
+from ..results import check_results_folder
 
 log = logging.getLogger("orca.report")
-
-
-def check_results_folder(results: Path) -> None:
-    """Raise a clear :class:`InputError` unless ``results`` is a capture's results folder (it holds at least
-    one stage folder)."""
-    if not results.exists():
-        raise InputError("results folder not found", results,
-                         "pass a capture's results folder, e.g. results/demo (run the pipeline first)")
-    if not results.is_dir():
-        raise InputError("not a results folder (a file, not a folder)", results,
-                         "pass a capture's results folder, e.g. results/demo")
-    if not any((results / s).is_dir() for s in STAGES):
-        hint = "pass a capture's results folder, e.g. results/demo, the one holding decode/, poses/, ..."
-        if (results / MANIFEST).is_file() and results.parent != results:
-            hint = f"this looks like one stage's folder: pass its parent, {results.parent}"
-        elif (RESULTS / results.resolve().name).is_dir() and results.resolve() != (
-                RESULTS / results.resolve().name).resolve():
-            hint = f"this looks like a capture folder: its results are in {RESULTS / results.resolve().name}"
-        raise InputError(f"not a results folder: none of {', '.join(s + '/' for s in STAGES)} is in it", results,
-                         hint)
 
 
 def run_report(results_dir: Path, out_dir: Path | None = None) -> dict[str, Any]:

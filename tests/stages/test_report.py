@@ -10,7 +10,7 @@ from html.parser import HTMLParser
 from pathlib import Path
 
 import pytest
-from helpers import TINY_DAG, png_data_uri_image
+from helpers import png_data_uri_image
 
 from pipeline.cli import main
 from pipeline.errors import InputError
@@ -18,36 +18,11 @@ from pipeline.layout import STAGES
 from pipeline.report.page import text
 from pipeline.stages.report import run_report
 
-# The DAG's tiny settings, logged at every step, with a coarser hull and mesh.
-TINY = [*TINY_DAG, "train.logging.log_every=1", "train.logging.preview_every=2", "train.device=cpu",
-        "masks.hull_resolution=32", "mesh.resolution=24"]
-
 
 @pytest.fixture(scope="module")
-def results(tiny_capture, tmp_path_factory) -> Path:
-    """``results/tiny/`` with every stage's folder, made by the stages themselves."""
-    capture = tmp_path_factory.mktemp("report_capture") / "tiny"
-    shutil.copytree(tiny_capture, capture)
-    shutil.copy(capture / "ground_truth" / "cameras.json", capture / "cameras.json")
-    shutil.copytree(capture / "ground_truth" / "masks", capture / "masks")
-    out = tmp_path_factory.mktemp("report_results") / "tiny"
-    sets = [a for s in TINY for a in ("--set", s)]
-    cams = str(out / "masks" / "cameras.json")
-    for argv in (
-        ["decode", str(capture), "--out", str(out / "decode")],
-        ["poses", str(capture), "--decode", str(out / "decode"), "--out", str(out / "poses")],
-        ["masks", str(capture), "--poses", str(out / "poses"), "--decode", str(out / "decode"), "--out",
-         str(out / "masks")],
-        ["train", "--decode", str(out / "decode"), "--cameras", cams, "--masks", str(out / "masks" / "masks"),
-         "--capture", str(capture), "--out", str(out / "train")],
-        ["mesh", str(out / "train"), "--cameras", cams, "--out", str(out / "mesh"), "--device", "cpu"],
-        ["export", str(out / "train"), "--cameras", cams, "--out", str(out / "export"), "--device", "cpu"],
-    ):
-        assert main([*argv, "--preset", "fast", *sets]) == 0, argv[0]
-    assert main(["evaluate", str(out / "train"), "--ground-truth", str(capture / "ground_truth"), "--cameras", cams,
-                 "--mesh", str(out / "mesh" / "mesh.ply"), "--out", str(out / "evaluate"), "--views", "1",
-                 "--downscale", "2", "--device", "cpu"]) == 0
-    return out
+def results(tiny_results) -> Path:
+    """``results/tiny/`` with every stage's folder, made by the stages themselves (conftest.py)."""
+    return tiny_results
 
 
 class Page(HTMLParser):
