@@ -11,6 +11,7 @@ import shlex
 import shutil
 import subprocess
 import sys
+from importlib.metadata import metadata
 from pathlib import Path
 
 import pytest
@@ -127,6 +128,13 @@ def test_other_command_is_real(where, argv):
         assert args[0] == "-c", f"{where}: only `python -c` is checked"
         proc = subprocess.run([sys.executable, *args], cwd=ROOT, capture_output=True, text=True, timeout=120)
         assert proc.returncode == 0, f"{where}:\n{proc.stderr[-2000:]}"
+    elif program == "pip":
+        assert args[:2] == ["install", "-e"], f"{where}: only `pip install -e .[extras]` is checked"
+        extras = re.fullmatch(r"\.\[([\w,]+)\]", args[2])
+        declared = metadata("orca-capture").get_all("Provides-Extra")
+        assert extras and set(extras[1].split(",")) <= set(declared), where
+    elif program == "jupyter":
+        assert args[0] == "lab" and all((ROOT / a).is_file() for a in args[1:]), where
     elif program == "tensorboard":
         assert shutil.which(program, path=str(Path(sys.executable).parent)) or shutil.which(program), where
     else:
