@@ -79,18 +79,30 @@ def test_the_notebook_draws_every_stage_of_the_tiny_results(tiny_results, tmp_pa
     assert all(f"{stage} ✓" in text[""] for stage in ("decode", "train", "evaluate", "report"))
     assert "4 photos at 48 x 36; looking at IMG_0001" in text["Decode: linear photos and clipped highlights"]
     assert "4 of 4 photos have a camera" in text["Poses: cameras and sparse points in 3D"]
+    assert "no sparse points (known cameras, no model)" in text["Poses: cameras and sparse points in 3D"]
     assert "iterations in" in text["Training curves"]
     assert "| normal MAE |" in text["Evaluation (a synthetic capture)"]
     assert str((results / "report" / "report.html").resolve()) in text["The report"]
 
 
-def test_on_partial_results_the_notebook_says_what_to_run(tiny_results, tmp_path):
+def test_on_partial_results_the_notebook_says_what_to_run(tiny_capture, tiny_results, tmp_path):
+    """Decode, and poses from a COLMAP model with 3D points (drawn with the cameras); nothing after them."""
+    from helpers import colmap_model
+
+    from pipeline.cameras import load_cameras
+    from pipeline.config import PosesConfig
+    from pipeline.stages.poses import run_poses
+
+    capture = tmp_path / "capture"
+    shutil.copytree(tiny_capture, capture)
+    colmap_model(load_cameras(capture / "ground_truth" / "cameras.json"), capture / "sparse" / "0", points=20)
     results = tmp_path / "tiny"
-    for stage in ("decode", "poses"):
-        shutil.copytree(tiny_results / stage, results / stage)
+    shutil.copytree(tiny_results / "decode", results / "decode")
+    run_poses(capture, results / "decode", results / "poses", PosesConfig())
     sections = _sections(_executed(results, DEVICE="cpu"))
     assert len(sections["Decode: linear photos and clipped highlights"]["png"]) == 1
-    assert len(sections["Poses: cameras and sparse points in 3D"]["png"]) == 1
+    poses = sections["Poses: cameras and sparse points in 3D"]
+    assert len(poses["png"]) == 1 and "20 sparse points" in poses["text"]
     for heading, stage in (("Masks over the photos", "masks"), ("Training curves", "train"), ("The mesh", "mesh"),
                            ("The environment from inside the object", "export")):
         assert sections[heading]["png"] == [], heading
