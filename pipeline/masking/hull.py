@@ -62,12 +62,27 @@ def in_hull(volume: np.ndarray, points: np.ndarray, max_votes: float) -> np.ndar
     return map_coordinates(volume, idx.T, order=1, mode="constant", cval=OUTSIDE_VOTES) < max_votes
 
 
+def hull_box(volume: np.ndarray, max_votes: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """The box ``(lo (3,), hi (3,))`` on [-1, 1]^3 outside which :func:`in_hull` is false for certain: the hull's
+    voxels' centres one voxel further out (a trilinear value mixes the 8 nearest centres, and is below
+    ``max_votes`` only if one of them is). None when the hull is empty."""
+    occupied = np.argwhere(volume < max_votes)
+    if len(occupied) == 0:
+        return None
+    res = volume.shape[0]
+    first, last = occupied.min(0) - 1, occupied.max(0) + 1  # voxel indices
+    return (first + 0.5) * (2.0 / res) - 1.0, (last + 0.5) * (2.0 / res) - 1.0
+
+
 def hull_depth(volume: np.ndarray, view: View, max_votes: float) -> np.ndarray:
     """``(H, W)`` float32: the distance along each pixel's ray to where it enters the hull ``volume < max_votes``
-    (:func:`in_hull`; ``inf``: it misses), marching in steps of half a voxel through the unit sphere."""
+    (:func:`in_hull`; ``inf``: it misses), marching in steps of half a voxel through the unit sphere.
+
+    A ray is sampled only inside the hull's box (:func:`hull_box`) and only until it enters: the samples and the
+    answer are those of marching every ray through the whole sphere, at a fraction of the cost."""
     out = np.full(view.shape, np.inf, np.float32)
-    box = sphere_box(view)
-    if box is None:
+    box, bounds = sphere_box(view), hull_box(volume, max_votes)
+    if box is None or bounds is None:
         return out
     x0, y0, x1, y1 = box
     d = pixel_rays(view, box).reshape(-1, 3)
@@ -78,10 +93,26 @@ def hull_depth(volume: np.ndarray, view: View, max_votes: float) -> np.ndarray:
     d, b, root = d[hit], b[hit], np.sqrt(disc[hit])
     t0, t1 = -b - root, -b + root
     steps = int(np.ceil(2.0 * volume.shape[0]))  # the diameter (2) in half voxels (2 / res each)
+    # each ray's samples k (at t0 + (t1 - t0) (k + 0.5) / steps) inside the box: slabs, axis by axis
+    with np.errstate(divide="ignore", invalid="ignore"):
+        near = (bounds[0][None] - o) / d
+        far = (bounds[1][None] - o) / d
+    enter = np.nanmax(np.minimum(near, far), axis=1)
+    leave = np.nanmin(np.maximum(near, far), axis=1)
+    scale = steps / (t1 - t0)
+    k_first = np.maximum(np.ceil((enter - t0) * scale - 0.5), 0)
+    k_last = np.minimum(np.floor((leave - t0) * scale - 0.5), steps - 1)
     entry = np.full(len(d), np.inf, np.float32)
-    for k in range(steps):
-        t = t0 + (t1 - t0) * ((k + 0.5) / steps)
-        np.minimum(entry, np.where(in_hull(volume, o + d * t[:, None], max_votes), t, np.inf), out=entry)
+    pending = k_first <= k_last
+    if pending.any():
+        for k in range(int(k_first[pending].min()), int(k_last[pending].max()) + 1):
+            rays = np.nonzero(pending & (k_first <= k) & (k <= k_last))[0]
+            if len(rays) == 0:
+                continue
+            t = t0[rays] + (t1[rays] - t0[rays]) * ((k + 0.5) / steps)
+            inside = in_hull(volume, o + d[rays] * t[:, None], max_votes)
+            entry[rays[inside]] = t[inside]
+            pending[rays[inside]] = False
     flat = np.full((y1 - y0) * (x1 - x0), np.inf, np.float32)
     flat[hit] = entry
     out[y0:y1, x0:x1] = flat.reshape(y1 - y0, x1 - x0)

@@ -8,8 +8,9 @@ import cv2
 import numpy as np
 
 from pipeline.cameras import look_at
-from pipeline.masking.hull import carve, hull_depth, hull_grid, reproject
+from pipeline.masking.hull import carve, hull_depth, hull_grid, in_hull, reproject
 from pipeline.masking.prior import find_prior_sphere, in_sphere_frame
+from pipeline.masking.support_plane import sorted_elementwise
 from pipeline.masking.sweeps import column_image, column_in_hull, corner_strength, floor_through_hull, front_evidence
 from pipeline.masking.views import (
     Plane,
@@ -62,6 +63,48 @@ def test_the_hull_of_exact_sphere_masks_reprojects_to_them():
         assert iou(reproject(votes, v, 0.5), m) > 0.93
     hull_sphere = [sphere_distance(v, radius=1.0) < 1.0 for v in views]
     assert all(iou(reproject(votes, v, 0.5), s) < 0.5 for v, s in zip(views, hull_sphere))
+
+
+def test_hull_depth_is_where_each_ray_enters_the_hull_as_marching_every_ray_through_the_sphere_finds():
+    """A ball of radius 0.3 off the centre as the hull, its votes growing outwards as a carve's do: the entry depths
+    equal those of sampling every ray at every step through the whole unit sphere (what the box and the early stop
+    skip changes nothing), and the analytic ray-ball distance to within a step."""
+    res, centre, radius, threshold = 48, np.array([0.35, -0.1, 0.05]), 0.3, 2.5
+    voxel = 2.0 / res
+    ax = (np.arange(res) + 0.5) / res * 2.0 - 1.0
+    grid = np.stack(np.meshgrid(ax, ax, ax, indexing="ij"), -1)
+    # votes 0 inside, 3 more per voxel outside: the threshold crossing lies between voxel centres
+    volume = np.clip((np.linalg.norm(grid - centre, axis=-1) - radius) / voxel * 3.0, 0.0, 20.0).astype(np.float32)
+    radius += threshold / 3.0 * voxel
+    for view in ring_views(6):
+        depth = hull_depth(volume, view, threshold)
+        d = pixel_rays(view).reshape(-1, 3)
+        o = view.c2w[:3, 3]
+        b = d @ o
+        disc = b * b - (o @ o - 1.0)
+        reference = np.full(len(d), np.inf)
+        steps = 2 * res
+        for k in reversed(range(steps)):  # every ray, every step, the nearest hit kept
+            t = -b - np.sqrt(np.maximum(disc, 0)) + 2 * np.sqrt(np.maximum(disc, 0)) * (k + 0.5) / steps
+            hit = (disc > 0) & in_hull(volume, o + d * t[:, None], threshold)
+            reference[hit] = t[hit]
+        np.testing.assert_array_equal(depth.reshape(-1), reference.astype(np.float32))
+        bc = d @ (o - centre)
+        ball = bc * bc - ((o - centre) @ (o - centre) - radius**2)
+        analytic = -bc - np.sqrt(np.maximum(ball, 0))
+        # the voxelized ball's outline is within about a voxel of the ball's: rays through the ball shrunk by
+        # two voxels enter it for certain
+        sure = bc * bc - ((o - centre) @ (o - centre) - (radius - 2 * voxel) ** 2) > 0
+        assert sure.sum() > 50 and np.isfinite(depth.reshape(-1)[sure]).all()
+        assert np.abs(depth.reshape(-1)[sure] - analytic[sure]).max() < 2.5 * voxel
+        assert not np.isfinite(depth.reshape(-1)[ball < 0]).any()
+
+
+def test_sorted_elementwise_is_a_sort_per_pixel():
+    rng = np.random.default_rng(0)
+    for k in range(1, 8):
+        arrays = [np.where(rng.random((5, 7)) < 0.2, np.inf, rng.random((5, 7))).astype(np.float32) for _ in range(k)]
+        np.testing.assert_array_equal(np.stack(sorted_elementwise(arrays)), np.sort(np.stack(arrays), axis=0))
 
 
 def test_doubtful_background_votes_count_less():
