@@ -39,10 +39,11 @@ RAW_SUFFIXES = frozenset(
     ".dng .cr2 .cr3 .crw .nef .nrw .arw .srf .sr2 .raf .orf .rw2 .rwl .pef .ptx .srw .kdc .dcr .k25 .mos .mrw "
     ".3fr .fff .erf .iiq .mef .x3f .raw .gpr".split()
 )
-RASTER_SUFFIXES = {".jpg": "jpeg", ".jpeg": "jpeg", ".png": "png", ".tif": "tiff", ".tiff": "tiff"}
+RASTER_SUFFIXES = {".jpg": "jpeg", ".jpeg": "jpeg", ".png": "png", ".tif": "tiff", ".tiff": "tiff", ".heic": "heif",
+                   ".heif": "heif"}
 PHOTO_SUFFIXES = RAW_SUFFIXES | frozenset(RASTER_SUFFIXES)
 
-Kind = Literal["raw", "jpeg", "png", "tiff"]
+Kind = Literal["raw", "jpeg", "png", "tiff", "heif"]
 
 # LibRaw's ``sizes.flip`` -> EXIF orientation (dcraw maps EXIF to flip with "50132467"[orientation & 7]).
 _FLIP_TO_EXIF = {0: 1, 1: 2, 3: 3, 2: 4, 4: 5, 6: 6, 7: 7, 5: 8}
@@ -54,6 +55,10 @@ CLIP_DILATE_RAW = 2
 # whole 5 x 5 window) small highlights kept LibRaw's saturated value, a 3 x 3 window catches every such pixel.
 SATURATED_REACH = 1
 CLIP_DILATE_RASTER = 1
+# Pillow's EXIF: the sub-IFD holding the exposure tags, and the tags read (TIFF/EXIF 2.3 numbers)
+PIL_EXIF_IFD = 0x8769
+PIL_TAGS = {"make": 0x010F, "model": 0x0110, "datetime": 0x0132, "shutter_s": 0x829A, "f_number": 0x829D,
+            "iso": 0x8827, "datetime_original": 0x9003, "focal_length_mm": 0x920A, "focal_length_35mm": 0xA405}
 
 
 def kind_of(path: Path) -> Kind | None:
@@ -220,6 +225,8 @@ def probe(path: Path) -> PhotoInfo:
         raise InputError("not a photo format the pipeline reads", path)
     if path.stat().st_size == 0:
         raise InputError("the file is empty", path, fix="copy the photo again from the camera or remove it")
+    if kind == "heif":
+        return _probe_heif(path)
     exif = read_exif(path)
     if kind == "raw":
         return _probe_raw(path, exif)
@@ -295,6 +302,44 @@ def _probe_raster(path: Path, kind: Kind, exif: ExifInfo) -> PhotoInfo:
         ) from e
     w, h = oriented_size(width, height, exif.orientation)
     return PhotoInfo(path, kind, w, h, exif.orientation, exif)
+
+
+def _open_heif(path: Path) -> Any:
+    """A HEIC/HEIF photo (the iPhone's default) opened by Pillow through pillow-heif, which applies the file's
+    rotation and mirroring on decoding (and so reports orientation 1)."""
+    import pillow_heif
+    from PIL import Image
+
+    pillow_heif.register_heif_opener()
+    try:
+        return Image.open(path)
+    except Exception as e:  # libheif raises various errors on garbage
+        raise InputError(f"not a readable HEIC/HEIF image ({type(e).__name__}: {e})", path,
+                         fix="copy it again from the phone or remove it from the capture folder") from e
+
+
+def _probe_heif(path: Path) -> PhotoInfo:
+    """HEIC/HEIF header: size (as seen) and EXIF from Pillow (exifread does not read these files)."""
+    with _open_heif(path) as im:
+        width, height = im.size
+        exif = exif_from_pillow(im.getexif())
+    return PhotoInfo(path, "heif", width, height, 1, exif)
+
+
+def exif_from_pillow(tags: Any) -> ExifInfo:
+    """:class:`ExifInfo` from a Pillow ``Image.Exif``, orientation left at 1 (the decoder applied it)."""
+    sub = tags.get_ifd(PIL_EXIF_IFD)
+
+    def get(tag: int) -> Any:
+        return sub.get(tag, tags.get(tag))
+
+    return ExifInfo(
+        make=_text(get(PIL_TAGS["make"])), model=_text(get(PIL_TAGS["model"])),
+        shutter_s=_num(get(PIL_TAGS["shutter_s"])), iso=_num(get(PIL_TAGS["iso"])),
+        f_number=_num(get(PIL_TAGS["f_number"])), focal_length_mm=_num(get(PIL_TAGS["focal_length_mm"])),
+        focal_length_35mm=_num(get(PIL_TAGS["focal_length_35mm"])),
+        datetime=_text(get(PIL_TAGS["datetime_original"]) or get(PIL_TAGS["datetime"])),
+    )
 
 
 def _libraw_message(e: Exception) -> str:
@@ -452,10 +497,12 @@ def decode_raw(
 
 
 def decode_raster(info: PhotoInfo, *, clip_fraction: float = 0.98) -> Decoded:
-    """JPEG/PNG/TIFF -> linear float RGB (inverse sRGB), EXIF orientation applied, clipped mask."""
+    """JPEG/PNG/TIFF/HEIC -> linear float RGB (inverse sRGB), EXIF orientation applied, clipped mask."""
     path = info.path
     if info.kind == "jpeg":
         encoded = _read_jpeg(path)
+    elif info.kind == "heif":
+        encoded = _read_heif(path)
     else:
         encoded = _read_cv2(path, info.kind)
     if encoded.ndim == 2:
@@ -499,6 +546,17 @@ def _read_jpeg(path: Path) -> np.ndarray:
             path,
             fix="copy it again from the camera or remove it from the capture folder",
         ) from e
+
+
+def _read_heif(path: Path) -> np.ndarray:
+    """8-bit RGB of a HEIC/HEIF photo (pillow-heif gives 10/12-bit ones as 8-bit), rotation applied."""
+    with _open_heif(path) as im:
+        try:
+            im.load()
+        except Exception as e:
+            raise InputError(f"the HEIC/HEIF data cannot be decoded ({e}); the file is truncated or corrupt", path,
+                             fix="copy it again from the phone or remove it from the capture folder") from e
+        return np.asarray(im.convert("RGB") if im.mode != "RGB" else im)
 
 
 def _read_cv2(path: Path, kind: str) -> np.ndarray:

@@ -9,7 +9,8 @@ default the first file in name order):
   white balance for the whole set (the reference's as-shot multipliers, or ``decode.white_balance``),
   demosaic (``decode.demosaic``), camera -> linear sRGB matrix, no gamma, no auto-brightness, no
   ``adjust_maximum``. A neutral at the white level is 1.0 (G multiplier = 1). See :mod:`pipeline.raw`.
-- JPEG/PNG/TIFF: inverse sRGB transfer (8 or 16 bit), EXIF orientation applied.
+- JPEG/PNG/TIFF/HEIC: inverse sRGB transfer (8 or 16 bit), EXIF orientation applied (HEIC: pillow-heif applies
+  the file's rotation on decoding).
 - Exposure: ``linear_i *= value_r / value_i`` with ``value = shutter_s * ISO / f_number**2`` from EXIF
   (``decode.normalize_exposure``). A field no photo records is left out; a field only some photos record
   is an error (we cannot tell how those photos were exposed).
@@ -57,7 +58,7 @@ SCHEMA_VERSION = 1
 class DecodedImage:
     name: str  # output stem: linear/<name>.exr, srgb/<name>.png, clipped/<name>.png
     source: Path
-    format: str  # raw | jpeg | png | tiff
+    format: str  # raw | jpeg | png | tiff | heif
     width: int
     height: int
     exposure_scale: float
@@ -253,7 +254,7 @@ decode.json, manifest.json.
 def register(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "decode",
-        help="photos (RAW/JPEG/PNG/TIFF) -> linear exposure-normalized EXR, sRGB PNG, clipped masks",
+        help="photos (RAW/JPEG/PNG/TIFF/HEIC) -> linear exposure-normalized EXR, sRGB PNG, clipped masks",
         description="Decode a capture's photos into linear, white-balanced, exposure-normalized float RGB.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,

@@ -355,6 +355,10 @@ def _jpeg_with_exif(path: Path, image: np.ndarray, *, orientation: int = 1, expo
         sub[0x8827] = int(exposure.iso)
         sub[0x920A] = IFDRational(42, 10)
         sub[0xA405] = 26
+    if path.suffix == ".heic":
+        import pillow_heif
+
+        pillow_heif.register_heif_opener()
     Image.fromarray(image).save(path, exif=exif.tobytes(), quality=98)
 
 
@@ -383,6 +387,31 @@ def test_jpeg_orientation_and_exif(tmp_path):
     assert res.images[1].exposure_scale == pytest.approx(2.0)  # half the shutter time -> scaled up 2x
     b = read_exr(tmp_path / "out" / "linear" / "rot6b.exr")
     assert b.mean() == pytest.approx(2 * got.mean(), rel=1e-6)
+
+
+def test_heic_orientation_and_exif(tmp_path):
+    """The iPhone's default format: decoded through pillow-heif upright (it applies the rotation the file
+    records) with its EXIF, exposure normalized like any photo's."""
+    cap = tmp_path / "cap"
+    cap.mkdir()
+    stored = np.full((40, 60, 3), 128, np.uint8)
+    stored[:8, :8] = (255, 0, 0)
+    _jpeg_with_exif(cap / "IMG_0001.heic", stored, orientation=6, exposure=Exposure(1 / 50, 200, 2.8))
+    _jpeg_with_exif(cap / "IMG_0002.HEIC", stored, orientation=6, exposure=Exposure(1 / 100, 200, 2.8))
+    res = run_decode(cap, tmp_path / "out", cfg(min_images=2))
+    got = read_exr(tmp_path / "out" / "linear" / "IMG_0001.exr")
+    assert got.shape == (60, 40, 3)  # displayed upright, as a JPEG with orientation 6
+    assert got[2, -3, 0] > 0.8 and got[2, -3, 1] < 0.1 and got[2, 2, 0] < 0.5
+    assert read_image(tmp_path / "out" / "srgb" / "IMG_0001.png").shape == (60, 40, 3)
+    doc = decode_json(tmp_path / "out")
+    exif = doc["images"][0]["exif"]
+    assert doc["images"][0]["format"] == "heif" and exif["make"] == "PhoneCo" and exif["orientation"] == 1
+    assert exif["shutter_s"] == pytest.approx(1 / 50) and exif["iso"] == 200 and exif["f_number"] == 2.8
+    assert exif["focal_length_mm"] == 4.2 and exif["focal_length_35mm"] == 26
+    assert res.images[1].exposure_scale == pytest.approx(2.0)
+    (cap / "IMG_0003.heic").write_bytes(b"not a heic file at all")
+    with pytest.raises(InputError, match="IMG_0003.heic.*HEIC"):
+        run_decode(cap, tmp_path / "out2", cfg(min_images=2))
 
 
 # --------------------------------------------------------------------------------------------- real RAW files
