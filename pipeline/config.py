@@ -48,7 +48,15 @@ class DecodeConfig(StrictModel):
         description="scale each image by its EXIF exposure (shutter x ISO / f-number^2) relative to the reference.",
     )
     min_images: int = Field(3, ge=1, description="fewer usable photos than this is an error.")
-    downscale: int = Field(1, ge=1, le=16, description="integer downscale factor (area averaging) after decoding.")
+    downscale: int | None = Field(
+        None, ge=1, le=16, description="integer downscale factor (area averaging) after decoding; default: the "
+        "smallest that brings the longest side to max_size or below."
+    )
+    max_size: int = Field(
+        1600, ge=0, description="without a downscale, photos whose longest side is larger are downscaled by the "
+        "smallest integer factor that fits (a 24 MP photo: 4x, 1500x1000): SfM, masks and training gain little "
+        "from more pixels and the decoded float images would fill memory; 0: full size."
+    )
     clip_fraction: float = Field(
         0.98,
         gt=0,

@@ -20,6 +20,8 @@ from .errors import InputError
 from .layout import CAMERAS_JSON, CAPTURE_CONFIGS, LLFF_IMAGE_NAMES, PHOTO_SUBDIR, POSES_BOUNDS, TRANSFORMS_JSON
 from .raw import PHOTO_SUFFIXES, RAW_SUFFIXES, PhotoInfo
 
+MAX_DOWNSCALE = 16  # decode.downscale's bound
+
 log = logging.getLogger("orca.decode")
 
 NOT_PHOTOS = {*CAPTURE_CONFIGS, CAMERAS_JSON, TRANSFORMS_JSON, POSES_BOUNDS, LLFF_IMAGE_NAMES}  # known cameras
@@ -193,3 +195,14 @@ def exposure_scales(infos: list[PhotoInfo], ref: PhotoInfo, normalize: bool) -> 
         "reference_value": ref_value,
     }
     return scales, doc
+
+
+def working_downscale(infos: list[PhotoInfo], downscale: int | None, max_size: int) -> int:
+    """The decode's integer downscale factor: ``downscale`` when given, else the smallest that brings the photos'
+    longest side to ``max_size`` or below (1 when ``max_size`` is 0), at most :data:`MAX_DOWNSCALE`."""
+    if downscale is not None:
+        return downscale
+    longest = max(max(i.width, i.height) for i in infos)
+    if max_size == 0 or longest <= max_size:
+        return 1
+    return min(MAX_DOWNSCALE, -(-longest // max_size))

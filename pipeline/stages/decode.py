@@ -16,7 +16,8 @@ default the first file in name order):
   is an error (we cannot tell how those photos were exposed).
 - Highlight-clipped pixels: raw values at or above ``black + clip_fraction * (white - black)`` in any
   channel, dilated 2 raw pixels (before white balance), plus anything LibRaw's output clipped.
-- ``decode.downscale``: k x k area averaging; a block is clipped if any of its pixels is.
+- ``decode.downscale``: k x k area averaging; a block is clipped if any of its pixels is. Without one, photos
+  larger than ``decode.max_size`` (1600 px longest side) are downscaled by the smallest factor that fits.
 
 Bad input stops the stage with an :class:`~pipeline.errors.InputError` before anything is written:
 the header pass collects **all** unreadable/corrupt files and names them together; a file whose pixel
@@ -45,7 +46,15 @@ from ..config import DecodeConfig, add_config_arguments, config_from_arguments
 from ..errors import InputError
 from ..layout import CAPTURE_YAML, DECODE, DECODE_JSON, IMAGE_KINDS, PHOTO_SUBDIR, decoded_files, stage_dir
 from ..log import progress
-from ..photos import check_sizes, exposure_scales, find_photos, raise_mixed_sizes, reference_photo, white_balance
+from ..photos import (
+    check_sizes,
+    exposure_scales,
+    find_photos,
+    raise_mixed_sizes,
+    reference_photo,
+    white_balance,
+    working_downscale,
+)
 from ..provenance import capture_record
 from ..raw import PhotoInfo
 
@@ -122,7 +131,10 @@ def run_decode(capture_dir: Path, out_dir: Path, config: DecodeConfig) -> Decode
     wb, wb_source = white_balance(infos, ref, config.white_balance)
     scales, exposure_doc = exposure_scales(infos, ref, config.normalize_exposure)
 
-    k = config.downscale
+    k = working_downscale(infos, config.downscale, config.max_size)
+    if config.downscale is None and k > 1:
+        log.info("photos of %dx%d downscaled %dx to %dx%d (decode.max_size %d; set decode.downscale to choose)",
+                 infos[0].width, infos[0].height, k, infos[0].width // k, infos[0].height // k, config.max_size)
     records: list[dict[str, Any]] = []
     images: list[DecodedImage] = []
     with atomic_dir(out_dir, DECODE, [capture_dir]) as tmp:

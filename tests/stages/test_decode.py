@@ -389,6 +389,20 @@ def test_jpeg_orientation_and_exif(tmp_path):
     assert b.mean() == pytest.approx(2 * got.mean(), rel=1e-6)
 
 
+def test_big_photos_are_downscaled_to_the_working_size_unless_a_downscale_is_given(tmp_path):
+    cap = tmp_path / "cap"
+    cap.mkdir()
+    rng = np.random.default_rng(0)
+    for k in range(3):
+        _jpeg_with_exif(cap / f"IMG_{k}.jpg", rng.integers(0, 255, (300, 400, 3), np.uint8))
+    for config, size in ((cfg(max_size=150), (133, 100)), (cfg(max_size=400), (400, 300)),
+                         (cfg(max_size=150, downscale=2), (200, 150)), (cfg(max_size=0), (400, 300))):
+        out = tmp_path / f"out_{config.max_size}_{config.downscale}"
+        run_decode(cap, out, config)
+        assert read_exr(out / "linear" / "IMG_0.exr").shape[1::-1] == size, (config, size)
+        assert decode_json(out)["downscale"] == round(400 / size[0])
+
+
 def test_heic_orientation_and_exif(tmp_path):
     """The iPhone's default format: decoded through pillow-heif upright (it applies the rotation the file
     records) with its EXIF, exposure normalized like any photo's."""
