@@ -68,6 +68,16 @@ def read_model(folder: Path, fix: str) -> pycolmap.Reconstruction:
         raise InputError(f"cannot read the COLMAP model: {e}", folder, fix=fix) from e
 
 
+def model_points(folder: Path) -> tuple[np.ndarray, np.ndarray]:
+    """The 3D points of the COLMAP model in ``folder`` (or its ``0/``), in its frame: ``xyz`` ``(M, 3)`` and their
+    colours ``(M, 3)`` uint8."""
+    rec = read_model(model_folder(folder), fix="rerun the poses stage")
+    points = list(rec.points3D.values())
+    xyz = np.array([p.xyz for p in points], np.float64).reshape(-1, 3)
+    rgb = np.array([p.color for p in points], np.uint8).reshape(-1, 3)
+    return xyz, rgb
+
+
 def rescale(rec: pycolmap.Reconstruction, width: int, height: int) -> None:
     """Every camera of ``rec``'s registered images scaled to ``width`` x ``height`` (focal lengths, principal
     point), and their images' 2D points with them; reprojection errors recomputed. Changes ``rec`` in place."""

@@ -40,7 +40,9 @@ IMAGE_KINDS = LINEAR, SRGB, CLIPPED = ("linear", "srgb", "clipped")  # a folder 
 
 # poses
 CAMERAS_JSON = "cameras.json"  # also a capture's known cameras, and masks' re-normalized cameras
-TRANSFORMS_JSON = "transforms.json"
+TRANSFORMS_JSON = "transforms.json"  # nerfstudio's, in the frame of the cameras.json beside it
+TRANSFORMS_COLMAP_JSON = "transforms_colmap.json"  # the masks stage's second one, in COLMAP's frame
+SPARSE_PLY, SPARSE_PLY_COLMAP = "sparse_pc.ply", "sparse_pc_colmap.ply"  # the sparse points for those files
 POSES_BOUNDS, LLFF_IMAGE_NAMES = "poses_bounds.npy", "all_image_names.txt"  # LLFF known cameras (pipeline.llff)
 SPARSE = "sparse"  # COLMAP's folder of models; ours is its model "0" (SPARSE_MODEL), beside COLMAP_IMAGES
 SPARSE_MODEL = f"{SPARSE}/0"  # COLMAP binary model: cameras.bin, images.bin, points3D.bin (+ rigs, frames)

@@ -8,10 +8,21 @@ cx, cy, w, h`` sit at the top level when shared and in a frame when not; pixel c
 with only ``camera_angle_x`` (Blender/instant-ngp) get ``fl_x = w / (2 tan(camera_angle_x / 2))`` and a
 centred principal point. Distortion (``k1, k2, k3, k4, p1, p2``) is returned separately: cameras.json is
 pinhole, so distorted known cameras must be undistorted by the caller.
+
+What nerfstudio's ``ns-train`` reads (:func:`nerfstudio_transforms`; its ``nerfstudio-data`` parser, checked by
+``bench/nerfstudio_check.py``): ``file_path`` an 8-bit image PIL opens (the decode stage's ``srgb/*.png``, never the
+linear EXR), ``mask_path`` a one-channel image of the same size whose 0 pixels are left out of training (our masks:
+255 = object, so nerfstudio trains on the object alone), ``ply_file_path`` the sparse points (splatfacto's
+starting Gaussians, else random) in the frame of the file's poses, and ``applied_transform``: the ``(3, 4)`` map
+from the original frame (COLMAP's: ``frame.to_colmap`` inverted) to the file's, which nerfstudio composes into the
+``dataparser_transform`` it saves, so its exports can go back to COLMAP's frame. It is a similarity (our frames are
+scaled); ``applied_scale`` is not written because nerfstudio 1.1 multiplies the points by it but not the poses.
+Paths are relative to the file's folder (nerfstudio joins them to it; ``..`` is allowed).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -19,7 +30,8 @@ from typing import Any
 import numpy as np
 from pydantic import ValidationError
 
-from .artifacts import read_stage_json, write_json
+from .alignment import Similarity
+from .artifacts import atomic_path, read_stage_json, write_json
 from .cameras import Camera, CameraSet, as_matrix4, camera_problems
 from .errors import InputError
 
@@ -54,6 +66,67 @@ def to_transforms(cameras: CameraSet, image_paths: dict[str, str] | None = None)
 
 def save_transforms(path: str | Path, cameras: CameraSet, image_paths: dict[str, str] | None = None) -> Path:
     return write_json(path, to_transforms(cameras, image_paths))
+
+
+def applied_transform(cameras: CameraSet) -> np.ndarray:
+    """``(3, 4)`` nerfstudio's ``applied_transform`` of ``cameras``: from the frame ``frame.to_colmap`` maps to
+    (COLMAP's, or known cameras' own) to theirs; the identity when they record none."""
+    to_colmap = cameras.frame.to_colmap
+    if to_colmap is None:
+        return np.eye(4)[:3]
+    return Similarity.from_matrix(np.asarray(to_colmap, np.float64)).inverse().matrix[:3]
+
+
+def from_colmap_frame(cameras: CameraSet, xyz: np.ndarray) -> np.ndarray:
+    """Points ``(M, 3)`` in the frame ``cameras``' ``frame.to_colmap`` maps to, moved into theirs ``(M, 3)``."""
+    m = applied_transform(cameras)
+    return np.asarray(xyz, np.float64).reshape(-1, 3) @ m[:, :3].T + m[:, 3]
+
+
+def in_colmap_frame(cameras: CameraSet) -> CameraSet:
+    """The cameras moved into the frame their ``frame.to_colmap`` maps to (their own when they record none)."""
+    if cameras.frame.to_colmap is None:
+        return cameras
+    to_colmap = Similarity.from_matrix(np.asarray(cameras.frame.to_colmap, np.float64))
+    cams = [c.model_copy(update={"camera_to_world": to_colmap.apply_c2w(c.c2w).tolist()}) for c in cameras.cameras]
+    return CameraSet(cameras=cams)
+
+
+def nerfstudio_transforms(cameras: CameraSet, images: Mapping[str, str], masks: Mapping[str, str] | None = None,
+                          points_file: str | None = None) -> dict[str, Any]:
+    """The ``transforms.json`` document ``ns-train`` reads (see the module doc) of ``cameras``: ``images`` and
+    ``masks`` map each camera's name to its 8-bit image and mask, ``points_file`` names the sparse points' PLY in
+    the cameras' frame; paths relative to where the file goes."""
+    doc = to_transforms(cameras, dict(images))
+    if masks is not None:
+        for frame, cam in zip(doc["frames"], cameras.cameras):
+            frame["mask_path"] = masks[cam.name]
+    doc["applied_transform"] = applied_transform(cameras).tolist()
+    if points_file is not None:
+        doc["ply_file_path"] = points_file
+    return doc
+
+
+def write_ply(path: str | Path, xyz: np.ndarray, rgb: np.ndarray) -> Path:
+    """Points ``(M, 3)`` with 8-bit colours ``(M, 3)`` as a binary PLY (double x, y, z; uchar red, green, blue), the
+    vertex layout open3d, nerfstudio and 3DGS read."""
+    xyz, rgb = np.asarray(xyz, np.float64).reshape(-1, 3), np.asarray(rgb, np.uint8).reshape(-1, 3)
+    if len(xyz) != len(rgb):
+        raise ValueError(f"{len(xyz)} points but {len(rgb)} colours")
+    vertex = np.empty(len(xyz), dtype=[("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("red", "u1"), ("green", "u1"),
+                                       ("blue", "u1")])
+    for k, axis in enumerate("xyz"):
+        vertex[axis] = xyz[:, k]
+    for k, channel in enumerate(("red", "green", "blue")):
+        vertex[channel] = rgb[:, k]
+    header = "".join([
+        "ply\nformat binary_little_endian 1.0\n", f"element vertex {len(xyz)}\n",
+        *(f"property double {a}\n" for a in "xyz"), *(f"property uchar {c}\n" for c in ("red", "green", "blue")),
+        "end_header\n"])
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(header.encode("ascii") + vertex.tobytes())
+    return path
 
 
 @dataclass(frozen=True)

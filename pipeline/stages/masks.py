@@ -33,7 +33,10 @@ composes, so exports in COLMAP units stay right. When the hull is empty the pose
 ``object_sphere`` says so (``fallback``, ``from``).
 
 Outputs (``out_dir``, written atomically): ``masks/<name>.png`` (0/255 at the image's full size),
-``cameras.json`` (re-normalized; ``masks.renormalize=false``: the poses frame), ``overlays/<name>.jpg``
+``cameras.json`` (re-normalized; ``masks.renormalize=false``: the poses frame), ``transforms.json`` (nerfstudio's, in
+cameras.json's frame: the 8-bit sRGB photos, the masks, ``sparse_pc.ply`` the poses stage's sparse points in that
+frame when it has some, ``applied_transform`` from COLMAP's; :mod:`pipeline.transforms`) and
+``transforms_colmap.json`` with ``sparse_pc_colmap.ply`` (the same in COLMAP's frame), ``overlays/<name>.jpg``
 (mask outline in green -- orange for a user's mask -- and the visual hull's in magenta on the photo),
 ``contact_sheet.jpg`` (every overlay; views that disagree with the hull framed in red),
 ``masks_report.json`` (per view: source, area, agreement with the hull; the support plane, the rounds,
@@ -44,6 +47,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import time
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -53,6 +57,7 @@ import numpy as np
 
 from ..artifacts import atomic_dir, check_output_dir, read_stage_json, write_json, write_manifest
 from ..cameras import load_cameras, save_cameras
+from ..colmap_model import model_files, model_folder, model_points
 from ..config import MasksConfig, add_config_arguments, config_from_arguments
 from ..errors import InputError
 from ..imageio import write_png
@@ -68,6 +73,12 @@ from ..layout import (
     OVERLAYS,
     POSES,
     POSES_REPORT,
+    SPARSE,
+    SPARSE_PLY,
+    SPARSE_PLY_COLMAP,
+    SRGB,
+    TRANSFORMS_COLMAP_JSON,
+    TRANSFORMS_JSON,
     USER_MASKS,
     mask_file,
     stage_dir,
@@ -83,6 +94,7 @@ from ..object_frame import renormalized, sphere_from_masks
 from ..provenance import FORCE_HELP, check_capture_folder, common_capture
 from ..qa import contact_sheet, mask_overlay, tile, write_jpeg
 from ..results import DecodeArtifacts, image_folder, load_decode, relocated
+from ..transforms import from_colmap_frame, in_colmap_frame, nerfstudio_transforms, write_ply
 from ..undistort import recorded_undistortion
 from ..user_masks import find_user_masks, refuse_empty, user_mask
 
@@ -126,6 +138,9 @@ def run_masks(
     if len(names) < 2:
         raise InputError(f"only {len(names)} camera(s); masks need at least 2 views", poses_dir / CAMERAS_JSON)
     decoded = load_decode(image_folder(cameras, poses_dir, Path(decode_dir) if decode_dir else None))
+    # the poses stage's sparse points (COLMAP's frame), for nerfstudio's files; known cameras may have none
+    sparse_files = model_files(model_folder(poses_dir / SPARSE)) if cameras.frame.to_colmap is not None else []
+    sparse = model_points(poses_dir / SPARSE) if sparse_files else None
     user_dir = user_masks_dir
     if user_dir is None and config.user_masks == "auto" and capture_dir is not None:
         user_dir = Path(capture_dir) / USER_MASKS if (Path(capture_dir) / USER_MASKS).is_dir() else None
@@ -231,7 +246,17 @@ def run_masks(
                 bar.advance(task)
         write_jpeg(tmp / CONTACT_SHEET, contact_sheet(tiles))
         moved = relocated(cameras, poses_dir, out_dir)
-        save_cameras(tmp / CAMERAS_JSON, renormalized(moved, centre, radius) if config.renormalize else moved)
+        trained = renormalized(moved, centre, radius) if config.renormalize else moved
+        save_cameras(tmp / CAMERAS_JSON, trained)
+        # nerfstudio's files: ours (the frame training uses) and COLMAP's, each with the sparse points in its frame
+        photos = {n: os.path.relpath(decoded.folder.resolve() / decoded.entry(n)[SRGB], out_dir.resolve())
+                  for n in names}
+        for cams, doc, ply in ((trained, TRANSFORMS_JSON, SPARSE_PLY),
+                               (in_colmap_frame(trained), TRANSFORMS_COLMAP_JSON, SPARSE_PLY_COLMAP)):
+            if sparse is not None:
+                write_ply(tmp / ply, from_colmap_frame(cams, sparse[0]), sparse[1])
+            write_json(tmp / doc, nerfstudio_transforms(cams, photos, {n: mask_file(n) for n in names},
+                                                        ply if sparse is not None else None))
         report = _report(records, agreement, (centre, radius, sphere is not None), config, plane, rounds, warnings,
                          scale, user_dir, time.time() - started)
         report["sphere_prior"] = {
@@ -242,6 +267,7 @@ def run_masks(
         write_json(tmp / MASKS_REPORT, report)
         inputs: dict[str, Path] = {CAMERAS_JSON: poses_dir / CAMERAS_JSON, DECODE_JSON: decoded.folder / DECODE_JSON}
         inputs.update({f"user_mask:{n}": p for n, p in user_files.items()})
+        inputs.update({f"{SPARSE}/{f.name}": f for f in sparse_files})
         write_manifest(tmp, stage=MASKS, inputs=inputs, config=config.model_dump(mode="json"), started=started,
                        capture=capture)
     seconds = time.time() - started

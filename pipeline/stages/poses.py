@@ -35,7 +35,9 @@ more than ``poses.undistort_threshold_px``, the decoded images are resampled to 
 ``orca train --decode results/<capture>/poses/undistorted``. Below the threshold (a synthetic capture; a good
 lens at low resolution) the decoded images are used as they are and cameras.json points at them.
 
-Outputs (``out_dir``, written atomically): ``cameras.json``, ``transforms.json`` (nerfstudio, same frame),
+Outputs (``out_dir``, written atomically): ``cameras.json``, ``transforms.json`` (nerfstudio, same frame: the
+decoded 8-bit sRGB PNGs, ``sparse_pc.ply`` the sparse points in that frame; :mod:`pipeline.transforms`; the masks
+stage writes the one to train on, with masks, in its frame),
 ``sparse/0/`` (COLMAP binary model, COLMAP's frame; SfM's or the capture's COLMAP model with cameras.json's
 PINHOLE cameras) beside ``images/`` (8-bit PNGs named as in the model, undistorted where the photos were: the
 layout 3DGS, gsplat and nerfstudio read, :mod:`pipeline.colmap_model`), ``poses_report.json``, ``poses.png``
@@ -76,6 +78,7 @@ from ..layout import (
     POSES_FIGURE,
     POSES_REPORT,
     SFM_DATABASE,
+    SPARSE_PLY,
     SRGB,
     TRANSFORMS_JSON,
     UNDISTORTED,
@@ -99,7 +102,7 @@ from ..sfm import (
     thumbnail,
     without_dropped,
 )
-from ..transforms import save_transforms
+from ..transforms import nerfstudio_transforms, write_ply
 from ..undistort import UndistortMaps, pinholes, undistort_mask, undistortion, write_undistorted
 
 log = logging.getLogger("orca.poses")
@@ -186,9 +189,11 @@ def run_poses(
         if undistort:
             write_undistorted(decoded, posed.names, undistort, tmp / UNDISTORTED)
             image_of = {n: f"{UNDISTORTED}/{decoded_files(n)[LINEAR]}" for n in posed.names}
+            srgb_of = {n: f"{UNDISTORTED}/{decoded_files(n)[SRGB]}" for n in posed.names}
         else:
             rel = os.path.relpath(decode_dir.resolve(), out_dir.resolve())
             image_of = {n: f"{rel}/{decoded.entry(n)[LINEAR]}" for n in posed.names}
+            srgb_of = {n: f"{rel}/{decoded.entry(n)[SRGB]}" for n in posed.names}
         if reconstruction is not None:
             images = tmp / UNDISTORTED if undistort else decode_dir
             write_dataset(reconstruction, tmp, {n: images / decoded.entry(n)[SRGB] for n in posed.names})
@@ -202,8 +207,12 @@ def run_poses(
         to_source = normalizing_similarity(sphere, posed.c2w)
         cameras = normalized_cameras(posed, K, to_source, image_of)
         save_cameras(tmp / CAMERAS_JSON, cameras)
-        save_transforms(tmp / TRANSFORMS_JSON, cameras, image_of)
         points_n = to_source.inverse().apply(posed.points) if posed.points is not None else None
+        has_points = points_n is not None and len(points_n) > 0 and posed.point_colors is not None
+        if has_points:
+            write_ply(tmp / SPARSE_PLY, points_n, posed.point_colors)
+        write_json(tmp / TRANSFORMS_JSON, nerfstudio_transforms(cameras, srgb_of,
+                                                                points_file=SPARSE_PLY if has_points else None))
         report = _report(posed, names, source, sphere, to_source, undistort, config, cameras)
         if checks is not None:
             report["checks"] = _checks_report(checks, checks_runs, posed, K, sizes, sphere, config)
