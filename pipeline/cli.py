@@ -25,6 +25,7 @@ from .signals import stop_on_sigterm, stopped_by
 # (subcommand, module defining register()) in DAG order.
 COMMANDS: list[tuple[str, str]] = [
     ("synth", "pipeline.synth.cli"),
+    ("frames", "pipeline.video_cli"),
     ("decode", "pipeline.stages.decode"),
     ("poses", "pipeline.stages.poses"),
     ("masks", "pipeline.stages.masks"),

@@ -19,6 +19,7 @@ from typing import Any
 from .errors import InputError
 from .layout import CAMERAS_JSON, CAPTURE_CONFIGS, LLFF_IMAGE_NAMES, PHOTO_SUBDIR, POSES_BOUNDS, TRANSFORMS_JSON
 from .raw import PHOTO_SUFFIXES, RAW_SUFFIXES, PhotoInfo
+from .video import VIDEO_SUFFIXES
 
 MAX_DOWNSCALE = 16  # decode.downscale's bound
 
@@ -55,8 +56,11 @@ def find_photos(capture_dir: Path) -> tuple[Path, list[Path], list[str]]:
             continue
         if p.suffix.lower() in PHOTO_SUFFIXES:
             photos.append(p)
+        elif p.suffix.lower() in VIDEO_SUFFIXES:
+            log.warning("skipping %s: a video; `orca frames %s %s` makes photos of it", p, p, capture_dir)
+            skipped.append(p.name)
         elif p.name.lower() not in NOT_PHOTOS or photo_dir is sub:
-            log.warning("skipping %s: not a photo (RAW, JPEG, PNG or TIFF)", p)
+            log.warning("skipping %s: not a photo (RAW, JPEG, PNG, TIFF or HEIC)", p)
             skipped.append(p.name)
     # RAW+JPEG pairs: keep the RAW. Other name clashes would overwrite each other's outputs.
     by_stem: dict[str, list[Path]] = {}

@@ -57,6 +57,7 @@ from ..photos import (
 )
 from ..provenance import capture_record
 from ..raw import PhotoInfo
+from ..video import VIDEO_SUFFIXES
 
 log = logging.getLogger("orca.decode")
 
@@ -92,11 +93,14 @@ def run_decode(capture_dir: Path, out_dir: Path, config: DecodeConfig) -> Decode
     started = time.time()
     capture_dir, out_dir = Path(capture_dir), Path(out_dir)
     photo_dir, files, skipped = find_photos(capture_dir)
+    videos = [str(photo_dir / n) for n in skipped if Path(n).suffix.lower() in VIDEO_SUFFIXES]
+    frames_fix = f"make photos of the video(s) with `orca frames {' '.join(videos)} {capture_dir}`"
     if not files:
         raise InputError(
-            "no photos found (RAW, JPEG, PNG or TIFF)",
+            "no photos found (RAW, JPEG, PNG, TIFF or HEIC)",
             photo_dir,
-            fix=f"put the photos in {capture_dir / PHOTO_SUBDIR} or at the top level of {capture_dir}",
+            fix=frames_fix if videos else
+            f"put the photos in {capture_dir / PHOTO_SUBDIR} or at the top level of {capture_dir}",
         )
 
     # Pass 1: headers only. Collect every unreadable file so the user can fix them all at once.
@@ -118,7 +122,7 @@ def run_decode(capture_dir: Path, out_dir: Path, config: DecodeConfig) -> Decode
         raise InputError(
             f"only {len(infos)} usable photo(s), at least {config.min_images} needed (decode.min_images)",
             photo_dir,
-            fix="add photos to the capture, or lower decode.min_images",
+            fix=frames_fix if videos else "add photos to the capture, or lower decode.min_images",
         )
     check_sizes(infos, photo_dir)
     kinds = Counter(i.kind for i in infos)
