@@ -5,7 +5,7 @@ notebook calls), each writing one folder under results/<capture>/ atomically.
     snakemake --cores 2                                   # every capture in config (default: the demo)
     snakemake --cores 2 -n                                # the plan, nothing run
     snakemake --cores 8 --config captures='["mug"]' preset=standard
-    snakemake --executor slurm ...                        # a cluster, through an executor plugin
+    snakemake --profile profiles/slurm                    # a Slurm cluster (pip install -e .[cluster])
 
 A synthetic capture (one with ground_truth/) is also evaluated against its ground truth. Last, every capture
 gets results/<capture>/report/report.html: one self-contained page of every stage's pictures and figures.
@@ -13,8 +13,9 @@ gets results/<capture>/report/report.html: one self-contained page of every stag
 Each rule's params hold a hash of the config values its stage runs with: changing one (an upgrade that changes
 a default included) reruns that stage and what follows it.
 
-Config keys (all optional): captures (list of folder names under captures_dir), captures_dir, results_dir,
-preset (fast | standard | paper), set (a list of config overrides, e.g. '["train.iterations=500"]').
+Config: config/config.yaml, checked against config/schema/config.schema.yaml (every key optional: captures,
+captures_dir, results_dir, preset, set, and resources, what the train, export and evaluate jobs ask a cluster
+for: gpu, mem_mb, runtime). Threads are fixed per rule; a local run gives a rule at most --cores of them.
 """
 
 import os
@@ -24,33 +25,45 @@ from pathlib import Path
 
 from pipeline import layout
 from pipeline.cameras import load_cameras
-from pipeline.config import PRESETS, stage_config_digest
+from pipeline.config import stage_config_digest
 from pipeline.photos import find_photos
 from pipeline.results import image_folder
+from snakemake.utils import validate
 
 # ------------------------------------------------------------------------------------------------- config
 
 # The `orca` CLI of the environment Snakemake itself runs in (no need for it to be on PATH).
 ORCA = f"{shlex.quote(sys.executable)} -m pipeline.cli"
 
-KNOWN_KEYS = {"captures", "captures_dir", "results_dir", "preset", "set"}
-unknown = set(config) - KNOWN_KEYS
-if unknown:
-    raise ValueError(f"unknown Snakemake config key(s) {sorted(unknown)}; known: {sorted(KNOWN_KEYS)}")
+# The workflow's own config file (not the working directory's: --directory points elsewhere); --configfile and
+# --config go on top of it. The schema rejects unknown keys and fills in missing ones.
+configfile: os.path.join(workflow.basedir, "config", "config.yaml")
+validate(config, "config/schema/config.schema.yaml")
 
-CAPTURES = config.get("captures", ["demo"])
+CAPTURES = config["captures"]
 if isinstance(CAPTURES, str):
     CAPTURES = [CAPTURES]
-CAPTURES_DIR = Path(config.get("captures_dir", "captures"))
-RESULTS_DIR = Path(config.get("results_dir", str(layout.RESULTS)))
-PRESET = config.get("preset", "fast")
+CAPTURES_DIR = Path(config["captures_dir"])
+RESULTS_DIR = Path(config["results_dir"])
+PRESET = config["preset"]
 # Config overrides for every stage, as `orca <stage> --set`: --config set='["train.iterations=500"]'
-OVERRIDES = config.get("set", [])
+OVERRIDES = config["set"]
 if isinstance(OVERRIDES, str):
     OVERRIDES = [OVERRIDES]
 SET = " ".join(f"--set {shlex.quote(str(o))}" for o in OVERRIDES)
-if PRESET not in PRESETS:
-    raise ValueError(f"unknown preset {PRESET!r}; choose one of {', '.join(PRESETS)}")
+# What the heavy rules ask a cluster for: {"train": {"gpu": 0, "mem_mb": 8000, "runtime": 240}, ...}
+RESOURCES = config["resources"]
+
+# Threads per job: Slurm's --cpus-per-task; a local run lowers them to --cores. SfM's threads and the PyTorch
+# stages' (training, rendering) make use of a few cores each.
+POSES_THREADS = 4
+TORCH_THREADS = 8
+
+# results/<capture>/benchmarks/<stage>.tsv: each job's wall time and memory (Snakemake's benchmark files)
+BENCHMARKS = "benchmarks"
+
+# Cheap rules run on the submitting host, not as cluster jobs.
+localrules: all, report
 
 for name in CAPTURES:
     if not (CAPTURES_DIR / name).is_dir():
@@ -66,6 +79,10 @@ def out(stage):
 
 def log_of(stage):
     return RESULTS_DIR / "{capture}" / layout.LOGS / f"{stage}.log"
+
+
+def benchmark_of(stage):
+    return RESULTS_DIR / "{capture}" / BENCHMARKS / f"{stage}.tsv"
 
 
 def has_ground_truth(capture):
@@ -144,6 +161,8 @@ rule decode:
         directory(out(layout.DECODE)),
     log:
         log_of(layout.DECODE),
+    benchmark:
+        benchmark_of(layout.DECODE),
     shell:
         "{ORCA} decode {CAPTURES_DIR}/{wildcards.capture} --out {output} --preset {PRESET} {SET} > {log} 2>&1"
 
@@ -162,7 +181,9 @@ rule poses:
         directory(out(layout.POSES)),
     log:
         log_of(layout.POSES),
-    threads: 4
+    benchmark:
+        benchmark_of(layout.POSES),
+    threads: POSES_THREADS
     shell:
         "{ORCA} poses {CAPTURES_DIR}/{wildcards.capture} --decode {input.decode} --out {output} --preset {PRESET} "
         "--set poses.num_threads={threads} {SET} > {log} 2>&1"
@@ -183,6 +204,8 @@ rule masks:
         directory(out(layout.MASKS)),
     log:
         log_of(layout.MASKS),
+    benchmark:
+        benchmark_of(layout.MASKS),
     shell:
         "{ORCA} masks {CAPTURES_DIR}/{wildcards.capture} --poses {input.poses} --decode {input.decode} "
         "--out {output} --preset {PRESET} {SET} > {log} 2>&1"
@@ -207,7 +230,11 @@ rule train:
         directory(out(layout.TRAIN)),
     log:
         log_of(layout.TRAIN),
-    threads: workflow.cores
+    benchmark:
+        benchmark_of(layout.TRAIN),
+    threads: TORCH_THREADS
+    resources:
+        **RESOURCES[layout.TRAIN],
     run:
         cameras = Path(input.masks) / layout.CAMERAS_JSON
         images = os.path.relpath(image_folder(load_cameras(cameras), cameras.parent, Path(input.decode)))
@@ -229,6 +256,8 @@ rule mesh:
         directory(out(layout.MESH)),
     log:
         log_of(layout.MESH),
+    benchmark:
+        benchmark_of(layout.MESH),
     shell:
         "{ORCA} mesh {input.train} --cameras {input.masks}/{layout.CAMERAS_JSON} --out {output} --preset {PRESET} "
         "{SET} > {log} 2>&1"
@@ -247,7 +276,11 @@ rule export:
         directory(out(layout.EXPORT)),
     log:
         log_of(layout.EXPORT),
-    threads: workflow.cores
+    benchmark:
+        benchmark_of(layout.EXPORT),
+    threads: TORCH_THREADS
+    resources:
+        **RESOURCES[layout.EXPORT],
     shell:
         "{ORCA} export {input.train} --cameras {input.masks}/{layout.CAMERAS_JSON} --out {output} --preset {PRESET} "
         "{SET} > {log} 2>&1"
@@ -266,6 +299,11 @@ rule evaluate:
         directory(out(layout.EVALUATE)),
     log:
         log_of(layout.EVALUATE),
+    benchmark:
+        benchmark_of(layout.EVALUATE),
+    threads: TORCH_THREADS
+    resources:
+        **RESOURCES[layout.EVALUATE],
     shell:
         "{ORCA} evaluate {input.train} --ground-truth {input.ground_truth} "
         "--cameras {input.masks}/{layout.CAMERAS_JSON} --mesh {input.mesh}/{layout.MESH_PLY} --out {output} --views 8 "
@@ -282,5 +320,7 @@ rule report:
         directory(out(layout.REPORT)),
     log:
         log_of(layout.REPORT),
+    benchmark:
+        benchmark_of(layout.REPORT),
     shell:
         "{ORCA} report {RESULTS_DIR}/{wildcards.capture} --out {output} > {log} 2>&1"

@@ -5,7 +5,6 @@ configs, links resolve; and the text holds no project history (session numbers, 
 
 from __future__ import annotations
 
-import ast
 import re
 import shlex
 import shutil
@@ -100,8 +99,7 @@ def test_snakemake_command_parses(where, argv):
     from snakemake.cli import get_argument_parser
 
     namespace = _parse(get_argument_parser(), argv[1:], where)
-    known = ast.literal_eval(re.search(r"^KNOWN_KEYS = (\{.*\})$", (ROOT / "Snakefile").read_text(),
-                                       re.MULTILINE).group(1))
+    known = set(yaml.safe_load((ROOT / "config" / "schema" / "config.schema.yaml").read_text())["properties"])
     config = dict(item.split("=", 1) for item in namespace.config or [])
     assert set(config) <= known, f"{where}: unknown Snakemake config keys {set(config) - known}"
     preset = config.get("preset", "fast")
