@@ -26,6 +26,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from ..errors import OrcaError
 from .scenes import ResolvedProp, ResolvedScene
 from .textures import poster, tile
 
@@ -43,8 +44,16 @@ MIN_GROUT_TEXELS = 2.0
 
 
 def mitsuba():
-    """The ``mitsuba`` module with the ``scalar_rgb`` variant set (imported lazily)."""
-    import mitsuba as mi
+    """The ``mitsuba`` module with the ``scalar_rgb`` variant set (imported lazily: it is the ``synth`` extra).
+
+    Raises:
+        OrcaError: mitsuba is not installed, with the command that installs it.
+    """
+    try:
+        import mitsuba as mi
+    except ImportError as e:
+        raise OrcaError(f"synthetic captures render with Mitsuba 3, which is not installed ({e})",
+                        fix='pip install -e ".[synth]" in the repository (or pip install "mitsuba>=3.5")') from e
 
     if mi.variant() != "scalar_rgb":
         mi.set_variant("scalar_rgb")
