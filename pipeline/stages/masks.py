@@ -366,7 +366,8 @@ examples:
 
 User masks: CAPTURE/masks/<photo name>.png (any of 0/255, 0/1, 16-bit, RGB, or a cut-out's alpha channel); a
 few files correct those views and help the rest. Output: masks/<name>.png, cameras.json (the object's tight
-sphere is the unit sphere: train on it), overlays/, contact_sheet.jpg, masks_report.json.
+sphere is the unit sphere: train on it), transforms.json and transforms_colmap.json (nerfstudio: ns-train
+splatfacto --data results/mug/masks/transforms.json), overlays/, contact_sheet.jpg, masks_report.json.
 """
 
 
