@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# A one-node Slurm cluster on this machine, on the loopback interface: to run the Snakefile through
+# A one-node Slurm cluster on this machine, at 127.0.0.1: to run the Snakefile through
 # `--executor slurm` (profiles/slurm) without a real cluster. Debian/Ubuntu, as root (munged and slurmd must be).
 #
-#   bash scripts/slurm_local.sh start    # install slurm-wlm + munge if missing, start munged, slurmctld, slurmd;
+#   bash scripts/slurm_local.sh start    # install Slurm + munge if missing, start munged, slurmctld, slurmd;
 #                                        # returns when `sinfo` shows the node idle; prints `started`, or
 #                                        # `running` when it already was (then stop is someone else's to do)
 #   bash scripts/slurm_local.sh status   # the node's state, the queue
@@ -11,7 +11,9 @@
 #   ORCA_SLURM_DIR   where its state, logs and pid files live (default /tmp/orca-slurm)
 #
 # The node is this host (its short name, its CPUs and memory as `slurmd -C` measures them) at 127.0.0.1, in one
-# partition `local`. The config goes where every Slurm command looks for it, /etc/slurm/slurm.conf (Snakemake's
+# partition `local`; the controller is at 127.0.0.1 too. (slurmctld and slurmd still listen on every interface,
+# ports 6817 and 6818: Slurm has no setting for the address they bind; munge authenticates every message with
+# this machine's key.) The config goes where every Slurm command looks for it, /etc/slurm/slurm.conf (Snakemake's
 # job step drops SLURM_* variables, SLURM_CONF included, before its srun), and is removed by stop; a slurm.conf
 # that this script did not write is left alone and start refuses. Jobs run as root, without cgroups
 # (proctrack/linuxproc, task/none) and without an accounting database: job states come from `squeue` (kept
@@ -26,17 +28,21 @@ NODE="$(hostname -s)"
 PARTITION="local"
 MIN_JOB_AGE=300     # seconds squeue still shows a finished job: the plugin's squeue status check needs >= 120
 IDLE_TIMEOUT=60     # seconds to wait for the node to register idle
-say() { printf '\033[1m[slurm_local]\033[0m %s\n' "$*" >&2; }
+# slurm-wlm's daemons and commands, without the metapackage's development files and extra plugins
+PACKAGES=(slurmctld slurmd slurm-client munge)
+BOLD=""; PLAIN=""
+if [ -t 2 ]; then BOLD=$'\033[1m'; PLAIN=$'\033[0m'; fi
+say() { printf '%s[slurm_local]%s %s\n' "$BOLD" "$PLAIN" "$*" >&2; }
 die() { say "$*"; exit 1; }
 
 install_packages() {
     command -v slurmctld >/dev/null && command -v slurmd >/dev/null && command -v munged >/dev/null && return
-    [ "$(id -u)" -eq 0 ] || die "slurm-wlm and munge are not installed and this is not root: apt-get install slurm-wlm munge"
-    command -v apt-get >/dev/null || die "slurm-wlm and munge are not installed and there is no apt-get"
-    say "installing Debian packages slurm-wlm and munge"
+    [ "$(id -u)" -eq 0 ] || die "Slurm and munge are not installed and this is not root: apt-get install ${PACKAGES[*]}"
+    command -v apt-get >/dev/null || die "Slurm and munge are not installed and there is no apt-get"
+    say "installing Debian packages ${PACKAGES[*]}"
     export DEBIAN_FRONTEND=noninteractive
     apt-get update -qq || die "apt-get update failed"
-    apt-get install -y -qq slurm-wlm munge >/dev/null || die "apt-get install slurm-wlm munge failed"
+    apt-get install -y -qq "${PACKAGES[@]}" >/dev/null || die "apt-get install ${PACKAGES[*]} failed"
 }
 
 munge_works() { munge -n 2>/dev/null | unmunge >/dev/null 2>&1; }
@@ -111,7 +117,8 @@ start() {
     fi
     start_munge
     write_conf
-    # -c: a fresh cluster each start, no jobs or node states left from an earlier one
+    # -c: a fresh cluster each start, no jobs or node states left from an earlier one (job ids start again)
+    rm -f "$DIR/jobcomp.log"
     slurmctld -c -f "$CONF" || die "slurmctld did not start (see $DIR/slurmctld.log)"
     slurmd -f "$CONF" || die "slurmd did not start (see $DIR/slurmd.log)"
     local state=""
