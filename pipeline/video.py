@@ -10,7 +10,7 @@ video's rotation, and written as JPEG files named ``<video stem>_<k>.jpg`` that 
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -41,20 +41,6 @@ def sharpness(frame: np.ndarray, size: int = SHARPNESS_SIZE) -> float:
 def stretch_of(index: int, total: int, count: int) -> int:
     """Which of ``count`` equal stretches of a ``total``-frame video frame ``index`` lies in."""
     return min(count - 1, index * count // total)
-
-
-def pick_frames(scores: Sequence[float], count: int) -> list[int]:
-    """Indices of the sharpest frame (highest score) in each of ``count`` equal stretches of ``scores``; every
-    frame when there are no more than ``count``."""
-    total = len(scores)
-    if total <= count:
-        return list(range(total))
-    best: dict[int, int] = {}
-    for i, s in enumerate(scores):
-        k = stretch_of(i, total, count)
-        if k not in best or s > scores[best[k]]:
-            best[k] = i
-    return [best[k] for k in sorted(best)]
 
 
 def read_frames(path: Path) -> tuple[dict, Iterator[np.ndarray]]:

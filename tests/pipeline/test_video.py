@@ -15,7 +15,7 @@ from pipeline.config import DecodeConfig
 from pipeline.errors import InputError
 from pipeline.imageio import read_image
 from pipeline.stages.decode import run_decode
-from pipeline.video import extract_frames, pick_frames, sharpness
+from pipeline.video import extract_frames, sharpness, stretch_of
 from pipeline.video_cli import run_frames
 
 SIZE = (160, 96)  # w, h: multiples of H.264's 16-pixel blocks
@@ -37,10 +37,10 @@ def write_video(path: Path, frames: int = 60, blur_all_but_every: int = 3) -> No
     writer.close()
 
 
-def test_the_sharpest_frame_of_each_equal_stretch_is_picked():
-    scores = [1, 5, 2, 9, 1, 1, 3, 2, 8, 0]
-    assert pick_frames(scores, 5) == [1, 3, 4, 6, 8]  # stretches [0,1] [2,3] [4,5] [6,7] [8,9]; ties: the first
-    assert pick_frames(scores, 20) == list(range(10))
+def test_a_video_is_cut_into_equal_stretches():
+    assert [stretch_of(i, 10, 5) for i in range(10)] == [0, 0, 1, 1, 2, 2, 3, 3, 4, 4]
+    assert [stretch_of(i, 7, 3) for i in range(7)] == [0, 0, 0, 1, 1, 2, 2]
+    assert [stretch_of(i, 4, 4) for i in range(4)] == [0, 1, 2, 3]
 
 
 def test_frames_are_evenly_spaced_and_sharp(tmp_path):
