@@ -485,6 +485,10 @@ class TrainConfig(StrictModel):
     grad_clip: float = Field(1.0, gt=0)
     device: Literal["auto", "cpu", "cuda"] = "auto"
     seed: int = 0
+    holdout_every: int = Field(
+        0, ge=0, description="hold every k-th photo (name order, from the first: LLFF's convention) out of training, "
+        "for `orca evaluate --held-out` to compare the model's renders with photos it never saw; 0: train on all"
+    )
     sdf: SDFConfig = Field(default_factory=SDFConfig)
     environment: EnvironmentConfig = Field(default_factory=EnvironmentConfig)
     render: RenderConfig = Field(default_factory=RenderConfig)

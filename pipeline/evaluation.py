@@ -49,6 +49,8 @@ LABELS = {  # metric -> (label, unit, which way is better)
     "ssim": ("SSIM (finite depth)", "", "higher"), "psnr_all": ("PSNR linear (all pixels)", "dB", "higher"),
     "psnr_srgb_all": ("PSNR sRGB (all pixels)", "dB", "higher"), "ssim_all": ("SSIM (all pixels)", "", "higher"),
     "prop_depth_absrel": ("prop depth AbsRel", "", "lower"), "prop_depth_rmse": ("prop depth RMSE", "units", "lower"),
+    "psnr_srgb_object": ("PSNR object (sRGB)", "dB", "higher"), "ssim_object": ("SSIM object", "", "higher"),
+    "psnr_srgb_frame": ("PSNR whole frame (sRGB)", "dB", "higher"), "ssim_frame": ("SSIM whole frame", "", "higher"),
 }
 
 DEFINITIONS = {
@@ -89,6 +91,9 @@ DEFINITIONS = {
     "poses": "after that alignment, per camera the rotation error (deg) and the centre error, in ground-truth "
              "units and in % of the orbit radius (the ground-truth cameras' median distance from the object "
              "centre); ground-truth cameras the result lacks are listed, not counted",
+    "held_out": "photos the model was not trained on (train.holdout_every) against its render of their cameras "
+                "(the object over the environment field), in decoded units: sRGB PSNR and SSIM as above over the "
+                "object (the masks stage's mask) and over the whole frame, highlight-clipped pixels left out",
     "mesh": "the mesh moved into the ground-truth frame against ground_truth/object.ply by open3d compute_metrics: "
             f"{MESH_SAMPLES} points sampled on each surface, distances to the other surface by ray casting; "
             "Chamfer = the sum of the two mean distances, Hausdorff distance, F-score in [0, 1] at "
@@ -170,7 +175,8 @@ def summary_tables(results: dict[str, Any]) -> list[Any]:
     from rich.table import Table
 
     tables = []
-    for part, title in (("object", "object views"), ("environment", "environment views")):
+    for part, title in (("object", "object views"), ("environment", "environment views"),
+                        ("held_out", "held-out photos")):
         res = results.get(part)
         if not res:
             continue
@@ -203,3 +209,17 @@ def summary_tables(results: dict[str, Any]) -> list[Any]:
                           "(higher is better)")
         tables.append(table)
     return tables
+
+
+HELD_OUT_METRICS = ("psnr_srgb_object", "ssim_object", "psnr_srgb_frame", "ssim_frame")
+
+
+def held_out_figures(render: np.ndarray, photo: np.ndarray, mask: np.ndarray, valid: np.ndarray) -> dict[str, Any]:
+    """A held-out photo ``(H, W, 3)`` (linear, decoded units) against the model's render of its camera ``render``
+    (the object over the environment field): sRGB PSNR (:func:`pipeline.metrics.psnr_srgb`) and SSIM over the
+    object (``mask`` ``(H, W)``, the masks stage's) and over the whole frame, highlight-clipped pixels (``valid``
+    false) left out of both: the photo does not record them."""
+    obj, frame = mask & valid, valid
+    return {"psnr_srgb_object": psnr_srgb(render, photo, obj), "ssim_object": ssim(render, photo, obj),
+            "psnr_srgb_frame": psnr_srgb(render, photo, frame), "ssim_frame": ssim(render, photo, frame),
+            "pixels": {"object": int(obj.sum()), "frame": int(frame.sum())}}

@@ -17,6 +17,9 @@ DISPLAY_PERCENTILE = 99.0
 TILE_INCHES = 2.4
 
 
+ERROR_GAIN = 4.0  # the held-out grid's error tiles: |render - photo| in sRGB, brightened
+
+
 def percentile_peak(image: np.ndarray, mask: np.ndarray, percentile: float = DISPLAY_PERCENTILE) -> float:
     """The ``percentile`` of ``image`` ``(H, W[, C])`` over ``mask`` pixels (all channels): an automatic exposure
     for pictures. NaN for an empty mask or a non-positive value (a black image has no meaningful peak)."""
@@ -103,5 +106,25 @@ def environment_grid(path: Path, rows: Sequence[tuple[str, dict, dict, dict]]) -
         if r == 0:
             for c, title in enumerate(columns):
                 axes[r, c].set_title(title, fontsize=9)
+    fig.savefig(path)
+    return path
+
+
+def held_out_grid(path: Path, rows: Sequence[tuple[str, np.ndarray, np.ndarray, np.ndarray, dict]]) -> Path:
+    """Rows (name, photo, render, object mask, figures) of photo | render | |error| of held-out photos, linear
+    images tone-mapped with the PSNR peak (as the camera saw them), the object's outline marked on the error."""
+    columns = ["held-out photo", "model's render", "error (x4)"]
+    h, w = rows[0][1].shape[:2]
+    fig, axes = tile_figure(len(rows), len(columns), h / w)
+    for r, (name, photo, render, mask, figures) in enumerate(rows):
+        shown_photo, shown_render = tone_map(photo, PSNR_PEAK), tone_map(render, PSNR_PEAK)
+        error = np.clip(np.abs(shown_render - shown_photo) * ERROR_GAIN, 0, 1)
+        for c, tile in enumerate((shown_photo, shown_render, error)):
+            axes[r, c].imshow(tile, interpolation="nearest")
+            if r == 0:
+                axes[r, c].set_title(columns[c], fontsize=9)
+        axes[r, 2].contour(mask, levels=[0.5], colors="yellow", linewidths=0.6)
+        axes[r, 0].set_ylabel(_row_label(name, figures, (("psnr_srgb_object", "object {:.1f} dB"),
+                                                         ("psnr_srgb_frame", "frame {:.1f} dB"))), fontsize=8)
     fig.savefig(path)
     return path

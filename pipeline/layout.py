@@ -89,6 +89,7 @@ VIEWS_JSON = "views.json"
 # evaluate, report
 EVALUATE_JSON = "evaluate.json"
 OBJECT_GRID, ENVIRONMENT_GRID = "object_grid.png", "environment_grid.png"
+HELD_OUT_GRID = "held_out_grid.png"  # evaluate --held-out: photo | render | error of each held-out photo
 REPORT_HTML = "report.html"
 
 

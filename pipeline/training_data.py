@@ -4,6 +4,7 @@ with the sparse depth of the surroundings when the poses stage's points are give
 from __future__ import annotations
 
 import logging
+from collections.abc import Collection, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -17,10 +18,22 @@ from .sparse_depth import depth_observations, load_sparse_points
 log = logging.getLogger("orca.train")
 
 
+def held_out(names: Sequence[str], every: int) -> list[str]:
+    """Every ``every``-th of ``names`` from the first (LLFF's convention), none for 0."""
+    return list(names[::every]) if every else []
+
+
+def posed_names(decode_dir: Path, cameras_path: Path) -> list[str]:
+    """The decoded images that have a camera in ``cameras_path``, in decode's order."""
+    cams = load_cameras(cameras_path).by_name()
+    return [n for n in load_decode(decode_dir).names if n in cams]
+
+
 def load_image_set(decode_dir: Path, cameras_path: Path, masks_dir: Path, points_dir: Path | None = None,
-                   object_margin_px: int = 4):
+                   object_margin_px: int = 4, exclude: Collection[str] = ()):
     """Decoded images matched by name to cameras and masks, intrinsics scaled to the decoded size, and the
-    sparse depth of the surroundings when ``points_dir`` (the poses stage's COLMAP model) is given.
+    sparse depth of the surroundings when ``points_dir`` (the poses stage's COLMAP model) is given; the images
+    named in ``exclude`` (held out) left out.
 
     Returns:
         (``orca.data.ImageSet`` in float32 on the CPU, the image names).
@@ -32,11 +45,11 @@ def load_image_set(decode_dir: Path, cameras_path: Path, masks_dir: Path, points
     decoded = load_decode(decode_dir)
     camera_set = load_cameras(cameras_path)
     cams = camera_set.by_name()
-    names = [n for n in decoded.names if n in cams]
     missing = [n for n in decoded.names if n not in cams]
     if missing:
         log.warning("%d decoded image(s) have no camera in %s and are not used: %s",
                     len(missing), cameras_path, ", ".join(missing[:10]))
+    names = [n for n in decoded.names if n in cams and n not in set(exclude)]
     if len(names) < 2:
         raise InputError(
             f"only {len(names)} decoded image(s) have a camera (names must match the decoded file stems)",

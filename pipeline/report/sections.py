@@ -28,6 +28,7 @@ from ..layout import (
     EXPORT,
     EXPORT_JSON,
     FLYTHROUGH_VIDEO,
+    HELD_OUT_GRID,
     MANIFEST,
     MASKS,
     MASKS_REPORT,
@@ -429,6 +430,11 @@ def section_evaluate(reader: Reader, folder: Path) -> tuple[str, Data]:
                                                   ENVIRONMENT_GRID)
     if isinstance(means.get("depth_absrel"), int | float):
         summary.append(f"environment depth AbsRel {means['depth_absrel']:.3g}")
+    data["held_out"], means = _evaluated_views(reader, folder, results.get("held_out"), "Held-out photos",
+                                               HELD_OUT_GRID)
+    if isinstance(means.get("psnr_srgb_object"), int | float):
+        summary.append(f"held-out photos: object {means['psnr_srgb_object']:.1f} dB, frame "
+                       f"{text(means.get('psnr_srgb_frame'))} dB (sRGB)")
     poses = results.get("poses")
     if isinstance(poses, dict):
         s = poses.get("summary") or {}

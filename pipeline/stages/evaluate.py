@@ -29,36 +29,45 @@ import numpy as np
 from ..alignment import Similarity, align_cameras
 from ..artifacts import atomic_dir, file_sha256, read_json, write_json, write_manifest
 from ..cameras import Camera, load_cameras, select_views
+from ..downscale import block_all, block_mean
 from ..errors import InputError
 from ..evaluation import (
     DEFINITIONS,
     ENVIRONMENT_METRICS,
+    HELD_OUT_METRICS,
     OBJECT_METRICS,
     environment_figures,
+    held_out_figures,
     json_safe,
     means,
     object_figures,
     summary_tables,
 )
-from ..figures import environment_grid, object_grid
+from ..figures import environment_grid, held_out_grid, object_grid
 from ..ground_truth import GroundTruth, resolve_ground_truth
+from ..imageio import write_exr
 from ..layout import (
     CAMERAS_JSON,
     ENVIRONMENT_GRID,
     EVALUATE_JSON,
+    HELD_OUT_GRID,
     MANIFEST,
+    MASK_FILES,
     MESH,
     MESH_PLY,
     MODEL,
     OBJECT_GRID,
     POSES,
     TRAIN,
+    TRAIN_REPORT,
 )
 from ..log import console, progress
+from ..mask_file import read_mask
 from ..metrics import mesh_errors
 from ..props import PROP_MARGIN
 from ..provenance import FORCE_HELP, common_capture
-from ..rendering import load_renderer, render_environment_view, render_object_view, write_views
+from ..rendering import load_renderer, render_composite_view, render_environment_view, render_object_view, write_views
+from ..results import image_folder, load_decode
 
 log = logging.getLogger("orca.evaluate")
 
@@ -116,10 +125,11 @@ def evaluate_views(model, gt: GroundTruth, align: Similarity, views: int | Seque
             "seconds_per_view": seconds / max(len(names), 1)}
 
 
-def _train_cameras(train_dir: Path) -> dict[str, Any]:
-    """The train manifest's record of the cameras.json it was trained with (``path``, ``sha256``), or {}."""
+def _train_input(train_dir: Path, key: str = "cameras") -> dict[str, Any]:
+    """The train manifest's record of one of its inputs (``path``, ``sha256``; ``cameras``: the cameras.json it
+    was trained with, ``decode``: the decode.json of its images), or {}."""
     try:
-        record = read_json(train_dir / MANIFEST)["inputs"]["cameras"]
+        record = read_json(train_dir / MANIFEST)["inputs"][key]
     except (OSError, KeyError, TypeError, ValueError):
         return {}
     return record if isinstance(record, dict) else {}
@@ -169,7 +179,7 @@ def run_evaluate(
                          "pass --no-environment, or regenerate the capture with `orca synth`")
     if mesh is not None and not Path(mesh).is_file():
         raise InputError("mesh not found", mesh, "run `orca mesh` first, or drop --mesh")
-    recorded = _train_cameras(train_dir)
+    recorded = _train_input(train_dir)
     trained_on_gt = recorded["sha256"] == file_sha256(gt.folder / CAMERAS_JSON) if "sha256" in recorded else None
     if cameras is None and isinstance(recorded.get("path"), str) and Path(recorded["path"]).is_file():
         cameras = Path(recorded["path"])
@@ -224,6 +234,91 @@ def run_evaluate(
     return results
 
 
+def run_held_out(
+    train_dir: Path,
+    out_dir: Path,
+    *,
+    cameras: Path | None = None,
+    masks: Path | None = None,
+    decode: Path | None = None,
+    downscale: int = 1,
+    device: str = "auto",
+    force: bool = False,
+) -> dict[str, Any]:
+    """Evaluate a model on the photos its training held out (``train.holdout_every``): each held-out camera
+    rendered (the object over the environment field) and compared with the photo; ``out_dir`` written atomically
+    (``evaluate.json`` with a ``held_out`` part, ``held_out_grid.png``, ``<view>_render.exr``).
+
+    Args:
+        cameras: the cameras.json the model was trained with; default: the one the train manifest records.
+        masks: the object masks (``masks/masks``); default: ``masks/`` beside ``cameras``.
+        decode: the photos' decode folder, for cameras without image paths; default: the train manifest's.
+    Returns:
+        The content of ``evaluate.json`` (NaN written as null).
+    """
+    started = time.time()
+    train_dir, out_dir = Path(train_dir), Path(out_dir)
+    if downscale < 1:
+        raise InputError(f"--downscale must be at least 1, got {downscale}")
+    weights = train_dir / MODEL
+    if not weights.is_file():
+        raise InputError("no trained model here", weights, "run `orca train` first (it writes model.pt when done)")
+    held = read_json(train_dir / TRAIN_REPORT).get("held_out") or []
+    if not held:
+        raise InputError("the model was trained on every photo: none was held out to compare with",
+                         train_dir / TRAIN_REPORT, fix="train with --set holdout_every=8 (every 8th photo held out)")
+    recorded = _train_input(train_dir)
+    if cameras is None and isinstance(recorded.get("path"), str):
+        cameras = Path(recorded["path"])
+    if cameras is None or not Path(cameras).is_file():
+        raise InputError("the cameras the model was trained with are not found", cameras or train_dir / MANIFEST,
+                         fix="pass --cameras results/<capture>/masks/cameras.json")
+    cameras = Path(cameras)
+    masks = Path(masks) if masks is not None else cameras.parent / MASK_FILES
+    if not masks.is_dir():
+        raise InputError("no masks folder", masks, fix="pass --masks results/<capture>/masks/masks")
+    camera_set = load_cameras(cameras)
+    cams = camera_set.by_name()
+    lacking = [n for n in held if n not in cams]
+    if lacking:
+        raise InputError(f"held-out photo(s) without a camera: {', '.join(lacking)}", cameras,
+                         fix="pass the cameras.json the model was trained with (--cameras)")
+    recorded_decode = _train_input(train_dir, "decode").get("path")
+    fallback = Path(decode) if decode is not None else Path(recorded_decode).parent if recorded_decode else None
+    decoded = load_decode(image_folder(camera_set, cameras.parent, fallback))
+    capture = common_capture([train_dir, cameras, masks], force=force)
+    model = load_renderer(train_dir, device)
+    log.info("evaluate: %d held-out photo(s) of %s (downscale %d)", len(held), train_dir, downscale)
+    per_view: dict[str, dict[str, Any]] = {}
+    with atomic_dir(out_dir, "evaluate", [train_dir, cameras, masks]) as tmp, progress() as bar:
+        task = bar.add_task("evaluate held-out photos", total=len(held))
+        rows = []
+        for name in held:
+            render = render_composite_view(model, cams[name], downscale)
+            h, w = render.shape[:2]
+            photo = block_mean(decoded.linear(name)[: h * downscale, : w * downscale], downscale)
+            valid = block_all(~decoded.clipped(name)[: h * downscale, : w * downscale], downscale)
+            mask = read_mask(masks / f"{name}.png", (w, h))
+            per_view[name] = held_out_figures(render, photo, mask, valid)
+            write_exr(tmp / f"{name}_render.exr", render)
+            rows.append((name, photo, render, mask, per_view[name]))
+            bar.advance(task)
+        held_out_grid(tmp / HELD_OUT_GRID, rows)
+        results = json_safe({
+            "train": str(train_dir), "cameras": str(cameras), "masks": str(masks), "definitions": DEFINITIONS,
+            "held_out": {"views": held, "downscale": downscale, "per_view": per_view,
+                         "mean": means(per_view, HELD_OUT_METRICS)},
+            "seconds": round(time.time() - started, 2), "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        })
+        write_json(tmp / EVALUATE_JSON, results)
+        write_manifest(tmp, stage="evaluate", inputs={"model": weights, "cameras": cameras}, started=started,
+                       config={"held_out": held, "downscale": downscale}, capture=capture)
+    for table in summary_tables(results):
+        console.print(table)
+    log.info("evaluate: wrote %s in %.1f s", out_dir, time.time() - started)
+    return results
+
+
 # ------------------------------------------------------------------------------------------------- CLI
 
 EPILOG = """\
@@ -233,6 +328,8 @@ examples:
   orca evaluate results/demo/train --ground-truth captures/demo/ground_truth --views 4 --downscale 2
         4 evenly spaced object views at half resolution: a quick look
   orca evaluate results/demo/train --ground-truth captures/demo/ground_truth --no-environment
+  orca evaluate results/mug --held-out
+        a real capture trained with --set holdout_every=8: the held-out photos against the model's renders
 
 Writes <out>/evaluate.json (per view and means, and the definition of every figure), object_grid.png,
 environment_grid.png and the predicted images (EXR).
@@ -248,7 +345,16 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument("train_dir", type=Path, metavar="RESULTS",
                    help="train stage folder (holds model.pt), or a capture's results folder holding train/")
-    p.add_argument("--ground-truth", type=Path, required=True, help="a synthetic capture's ground_truth/ folder")
+    which = p.add_mutually_exclusive_group(required=True)
+    which.add_argument("--ground-truth", type=Path, help="a synthetic capture's ground_truth/ folder")
+    which.add_argument("--held-out", action="store_true",
+                       help="a real capture: the photos training held out (train.holdout_every) against the model's "
+                            "renders of their cameras")
+    p.add_argument("--masks", type=Path, default=None,
+                   help="--held-out: the object masks (default: masks/ beside the cameras.json)")
+    p.add_argument("--decode", type=Path, default=None,
+                   help="--held-out: the photos' decode folder when the cameras name no images (default: the one "
+                        "the model was trained on)")
     p.add_argument("--cameras", type=Path, default=None,
                    help="the cameras.json the model was trained with (e.g. results/<capture>/poses/cameras.json): "
                         "aligns its frame to the ground truth's and reports pose errors (default: RESULTS/poses/"
@@ -283,6 +389,9 @@ def resolve_results(path: Path) -> tuple[Path, Path | None, Path | None]:
 def main(args: argparse.Namespace) -> dict[str, Any]:
     train_dir, cameras, mesh = resolve_results(args.train_dir)
     out = args.out if args.out is not None else train_dir.parent / "evaluate"
+    if args.held_out:
+        return run_held_out(train_dir, out, cameras=args.cameras, masks=args.masks, decode=args.decode,
+                            downscale=args.downscale, device=args.device, force=args.force)
     return run_evaluate(train_dir, args.ground_truth, out, views=args.views, downscale=args.downscale,
                         object=not args.no_object, environment=not args.no_environment,
                         cameras=args.cameras or cameras, mesh=args.mesh or mesh, device=args.device,

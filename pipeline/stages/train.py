@@ -44,7 +44,7 @@ from ..layout import (
 from ..model_io import model_spec, resolve_device, save_model
 from ..provenance import FORCE_HELP, common_capture
 from ..training import train, with_far_from_points
-from ..training_data import load_image_set
+from ..training_data import held_out, load_image_set, posed_names
 
 log = logging.getLogger("orca.train")
 
@@ -95,7 +95,12 @@ def run_train(
     remove_stale_temporary_files(ckpt_dir)  # a checkpoint cut short by SIGKILL
     device = resolve_device(cfg.device)
     torch.manual_seed(cfg.seed)
-    data, names = load_image_set(decode_dir, cameras_path, masks_dir, points_dir, cfg.sampler.depth_object_margin_px)
+    held = held_out(posed_names(decode_dir, cameras_path), cfg.holdout_every)
+    if held:
+        log.info("train: %d photo(s) held out for evaluation (train.holdout_every %d): %s", len(held),
+                 cfg.holdout_every, ", ".join(held))
+    data, names = load_image_set(decode_dir, cameras_path, masks_dir, points_dir, cfg.sampler.depth_object_margin_px,
+                                 exclude=held)
     n_img, height, width = data.shape
     log.info("train: %d images %dx%d, %d object pixels, device %s, %d iterations", n_img, width, height,
              int(data.masks.sum()), device, cfg.iterations)
@@ -116,7 +121,7 @@ def run_train(
             shutil.copytree(ckpt_dir / PREVIEWS, tmp / PREVIEWS)
         shutil.copytree(ckpt_dir / LIVE_TENSORBOARD, tmp / TENSORBOARD)
         write_json(tmp / TRAIN_REPORT, {
-            "iterations": run.step, "images": names, "size": [width, height], "device": str(device),
+            "iterations": run.step, "images": names, "held_out": held, "size": [width, height], "device": str(device),
             "seconds_this_run": round(run.seconds, 2), "training_seconds": round(run.seconds_total, 2),
             "final_losses": run.final_losses, "beta": model.beta.item(),
             "sparse_depth_pixels": len(data.depth) if data.depth is not None else 0,
