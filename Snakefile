@@ -7,7 +7,8 @@ notebook calls), each writing one folder under results/<capture>/ atomically.
     snakemake --cores 8 --config captures='["mug"]' preset=standard
     snakemake --profile profiles/slurm                    # a Slurm cluster (pip install -e .[cluster])
 
-A synthetic capture (one with ground_truth/) is also evaluated against its ground truth. Last, every capture
+A synthetic capture (one with ground_truth/) is also evaluated against its ground truth, a real one trained
+with train.holdout_every on the photos it held out (orca evaluate --held-out). Last, every capture
 gets results/<capture>/report/report.html: one self-contained page of every stage's pictures and figures.
 
 Each rule's params hold a hash of the config values its stage runs with: changing one (an upgrade that changes
@@ -25,7 +26,7 @@ from pathlib import Path
 
 from pipeline import layout
 from pipeline.cameras import load_cameras
-from pipeline.config import stage_config_digest
+from pipeline.config import stage_config, stage_config_digest
 from pipeline.photos import find_photos
 from pipeline.results import image_folder
 from snakemake.utils import validate
@@ -89,6 +90,18 @@ def has_ground_truth(capture):
     return (CAPTURES_DIR / capture / layout.GROUND_TRUTH / layout.SCENE_JSON).is_file()
 
 
+def holds_out(capture):
+    """Whether training holds photos out (train.holdout_every, from the preset, capture.yaml and --config set):
+    a capture without ground truth is then evaluated on them."""
+    capture_yaml = CAPTURES_DIR / capture / layout.CAPTURE_YAML
+    return stage_config("train", PRESET, None, OVERRIDES, capture_yaml).train.holdout_every > 0
+
+
+def evaluated(capture):
+    """A synthetic capture against its ground truth, a real one on its held-out photos when it has some."""
+    return has_ground_truth(capture) or holds_out(capture)
+
+
 # ---------------------------------------------------------------------------------------- input functions
 
 
@@ -133,10 +146,24 @@ def user_masks(wildcards):
     return {"user_masks": str(path)} if path.is_dir() else {}
 
 
+def evaluate_inputs(wildcards):
+    """The ground truth of a synthetic capture (none for a real one, evaluated on its held-out photos)."""
+    path = CAPTURES_DIR / wildcards.capture / layout.GROUND_TRUTH
+    return {"ground_truth": str(path)} if has_ground_truth(wildcards.capture) else {}
+
+
+def evaluate_against(wildcards, input):
+    """evaluate's arguments: the ground truth and the mesh, or the held-out photos."""
+    if "ground_truth" in input.keys():
+        return (f"--ground-truth {input.ground_truth} --mesh {input.mesh}/{layout.MESH_PLY} --views 8 "
+                "--downscale 2")
+    return "--held-out --downscale 2"
+
+
 def report_inputs(wildcards):
     """Every stage's folder of the capture, evaluate's only when the capture has ground truth: the report shows
     them all, and is redone when any of them changes."""
-    stages = [s for s in layout.STAGES if s != layout.EVALUATE or has_ground_truth(wildcards.capture)]
+    stages = [s for s in layout.STAGES if s != layout.EVALUATE or evaluated(wildcards.capture)]
     return {stage: str(RESULTS_DIR / wildcards.capture / stage) for stage in stages}
 
 
@@ -146,7 +173,7 @@ def report_inputs(wildcards):
 rule all:
     input:
         [expand(out(s), capture=CAPTURES) for s in layout.STAGES if s not in (layout.DECODE, layout.EVALUATE)],
-        [RESULTS_DIR / c / layout.EVALUATE for c in CAPTURES if has_ground_truth(c)],
+        [RESULTS_DIR / c / layout.EVALUATE for c in CAPTURES if evaluated(c)],
         expand(out(layout.REPORT), capture=CAPTURES),
 
 
@@ -289,12 +316,15 @@ rule export:
 rule evaluate:
     """A synthetic capture's trained model against its ground truth: camera alignment and pose errors, the
     mesh's Chamfer distance, normals, diffuse / specular / combined, environment views and their depth (8
-    object views at half size keep it minutes on a CPU)."""
+    object views at half size keep it minutes on a CPU). A real capture trained with train.holdout_every: the
+    held-out photos against the model's renders of their cameras."""
     input:
+        unpack(evaluate_inputs),
         train=out(layout.TRAIN),
         masks=out(layout.MASKS),
         mesh=out(layout.MESH),
-        ground_truth=CAPTURES_DIR / "{capture}" / layout.GROUND_TRUTH,
+    params:
+        against=evaluate_against,
     output:
         directory(out(layout.EVALUATE)),
     log:
@@ -305,9 +335,8 @@ rule evaluate:
     resources:
         **RESOURCES[layout.EVALUATE],
     shell:
-        "{ORCA} evaluate {input.train} --ground-truth {input.ground_truth} "
-        "--cameras {input.masks}/{layout.CAMERAS_JSON} --mesh {input.mesh}/{layout.MESH_PLY} --out {output} --views 8 "
-        "--downscale 2 > {log} 2>&1"
+        "{ORCA} evaluate {input.train} {params.against} --cameras {input.masks}/{layout.CAMERAS_JSON} "
+        "--out {output} > {log} 2>&1"
 
 
 rule report:

@@ -86,3 +86,9 @@ def test_a_capture_of_bare_photos_plans_sfm_masks_and_training(tiny_capture, tmp
     for rule in ("decode", "poses", "masks", "train", "mesh", "export", "report"):
         assert f"rule {rule}:" in out or f"localrule {rule}:" in out, rule
     assert "evaluate" not in out  # no ground truth: nothing to evaluate against (nor for the report to wait on)
+    # with photos held out of training, the held-out photos are what it is evaluated on, and the report waits
+    (capture / "capture.yaml").write_text("train:\n  holdout_every: 2\n")
+    plan = snakemake(tmp_path, "-n", "-p")
+    out = plan.stdout + plan.stderr
+    assert plan.returncode == 0, out[-3000:]
+    assert "rule evaluate:" in out and "evaluate" in out and "--held-out" in out and "--ground-truth" not in out
