@@ -55,6 +55,8 @@ CLIP_DILATE_RAW = 2
 # whole 5 x 5 window) small highlights kept LibRaw's saturated value, a 3 x 3 window catches every such pixel.
 SATURATED_REACH = 1
 CLIP_DILATE_RASTER = 1
+# exifread's words for a file that simply has no EXIF (logged at debug level, not as warnings)
+NO_EXIF_MESSAGES = ("does not have exif data", "No EXIF header")
 # Pillow's EXIF: the sub-IFD holding the exposure tags, and the tags read (TIFF/EXIF 2.3 numbers)
 PIL_EXIF_IFD = 0x8769
 PIL_TAGS = {"make": 0x010F, "model": 0x0110, "datetime": 0x0132, "shutter_s": 0x829A, "f_number": 0x829D,
@@ -153,7 +155,11 @@ def _naming_the_file(logger: logging.Logger, path: Path) -> Iterator[None]:
     recognized.") do not say which of a capture's photos they are about."""
 
     def name_it(record: logging.LogRecord) -> bool:
-        record.msg, record.args = f"{path}: EXIF: {record.getMessage()}", ()
+        message = record.getMessage()
+        if any(m in message for m in NO_EXIF_MESSAGES):  # a photo without EXIF is common (PNG exports): no warning
+            log.debug("%s: EXIF: %s", path, message)
+            return False
+        record.msg, record.args = f"{path}: EXIF: {message}", ()
         return True
 
     logger.addFilter(name_it)

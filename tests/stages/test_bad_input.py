@@ -5,6 +5,7 @@ in the test and small: seconds each, but for the few marked slow.
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import pytest
@@ -783,14 +784,13 @@ def test_unreadable_photos_get_one_fix(tmp_path, caplog):
 
 
 def test_exif_warnings_name_the_photo(tmp_path, caplog):
-    """Item 11: exifread's warnings ("PNG file does not have exif data.") did not say which photo."""
+    """Item 11: exifread's warnings ("File format not recognized.") did not say which photo; a photo that just
+    has no EXIF ("PNG file does not have exif data.", common for PNG exports) is no warning at all."""
     capture = _png_capture(tmp_path / "cap")
     (capture / "IMG_1.png").write_bytes(b"not a png")
     _orca_log(caplog, "decode", capture, "--out", tmp_path / "decode")
-    exif = [r.getMessage() for r in caplog.records if r.name == "exifread"]
-    assert len(exif) == 3, exif
-    for name, message in zip(["IMG_0.png", "IMG_1.png", "IMG_2.png"], exif):
-        assert message.startswith(f"{capture / name}: EXIF: ")
+    exif = [r.getMessage() for r in caplog.records if r.name == "exifread" and r.levelno >= logging.WARNING]
+    assert len(exif) == 1 and exif[0].startswith(f"{capture / 'IMG_1.png'}: EXIF: "), exif
 
 
 def test_a_damaged_mask_for_training_is_a_message_naming_it(tiny_capture, tiny_decode, tmp_path):
