@@ -209,6 +209,10 @@ def run_masks(
     else:
         centre, radius = sphere[0], sphere[1] * config.sphere_margin
     warnings += _check(names, final, agreement, views, radius, prior, config)
+    if plane is None and config.floor and len(fixed) < len(views):
+        warnings.append("no support plane was found (the floor or table under the object, by photo-consistency): "
+                        "the automatic masks cannot tell the floor beside the object from the object and may keep a "
+                        "skirt of it; check contact_sheet.jpg, and give masks for a few views in CAPTURE/masks/")
     # back to the poses frame: segmentation ran where the prior sphere is the unit sphere
     centre, radius = prior.centre + prior.radius * centre, prior.radius * radius
     if plane is not None:
