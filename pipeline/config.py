@@ -32,6 +32,9 @@ class StrictModel(BaseModel):
 SectionT = TypeVar("SectionT", bound=StrictModel)
 
 
+MAX_DOWNSCALE = 16  # decode.downscale's bound, and that of the factor decode.max_size chooses
+
+
 class DecodeConfig(StrictModel):
     """How photos become linear, exposure-normalized radiance (``orca decode``; see pipeline/stages/decode.py)."""
 
@@ -49,8 +52,8 @@ class DecodeConfig(StrictModel):
     )
     min_images: int = Field(3, ge=1, description="fewer usable photos than this is an error.")
     downscale: int | None = Field(
-        None, ge=1, le=16, description="integer downscale factor (area averaging) after decoding; default: the "
-        "smallest that brings the longest side to max_size or below."
+        None, ge=1, le=MAX_DOWNSCALE, description="integer downscale factor (area averaging) after decoding; default: "
+        "the smallest that brings the longest side to max_size or below."
     )
     max_size: int = Field(
         1600, ge=0, description="without a downscale, photos whose longest side is larger are downscaled by the "

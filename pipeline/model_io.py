@@ -68,13 +68,23 @@ def save_model(path: Path, model, cfg: TrainConfig, step: int) -> None:
                 "config": cfg.model_dump_json()}, path)
 
 
+def model_file(train_dir: Path) -> Path:
+    """The trained model's file of a train folder.
+
+    Raises:
+        InputError: there is none (training has not finished there).
+    """
+    path = Path(train_dir) / MODEL
+    if not path.is_file():
+        raise InputError("no trained model here", path, "run `orca train` first (it writes model.pt when done)")
+    return path
+
+
 def load_model(train_dir: Path, device: str = "cpu"):
     """The trained model of a train folder (safe loading), in eval mode."""
     from orca.model import OrcaModel
 
-    path = Path(train_dir) / MODEL
-    if not path.is_file():
-        raise InputError("no trained model here", path, "run `orca train` first")
+    path = model_file(train_dir)
     state = load_checkpoint(path)
     cfg = TrainConfig.model_validate_json(state["config"])
     model = OrcaModel(model_spec(cfg))

@@ -16,12 +16,11 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
+from .config import MAX_DOWNSCALE
 from .errors import InputError
 from .layout import CAMERAS_JSON, CAPTURE_CONFIGS, LLFF_IMAGE_NAMES, PHOTO_SUBDIR, POSES_BOUNDS, TRANSFORMS_JSON
 from .raw import PHOTO_SUFFIXES, RAW_SUFFIXES, PhotoInfo
 from .video import VIDEO_SUFFIXES
-
-MAX_DOWNSCALE = 16  # decode.downscale's bound
 
 log = logging.getLogger("orca.decode")
 

@@ -49,7 +49,8 @@ def load_image_set(decode_dir: Path, cameras_path: Path, masks_dir: Path, points
     if missing:
         log.warning("%d decoded image(s) have no camera in %s and are not used: %s",
                     len(missing), cameras_path, ", ".join(missing[:10]))
-    names = [n for n in decoded.names if n in cams and n not in set(exclude)]
+    excluded = set(exclude)
+    names = [n for n in decoded.names if n in cams and n not in excluded]
     if len(names) < 2:
         raise InputError(
             f"only {len(names)} decoded image(s) have a camera (names must match the decoded file stems)",

@@ -64,6 +64,7 @@ from ..layout import (
 from ..log import console, progress
 from ..mask_file import read_mask
 from ..metrics import mesh_errors
+from ..model_io import model_file
 from ..props import PROP_MARGIN
 from ..provenance import FORCE_HELP, common_capture
 from ..rendering import load_renderer, render_composite_view, render_environment_view, render_object_view, write_views
@@ -170,9 +171,7 @@ def run_evaluate(
                          fix="drop --no-object or --no-environment")
     if downscale < 1:
         raise InputError(f"--downscale must be at least 1, got {downscale}")
-    weights = train_dir / MODEL
-    if not weights.is_file():
-        raise InputError("no trained model here", weights, "run `orca train` first (it writes model.pt when done)")
+    weights = model_file(train_dir)
     gt = resolve_ground_truth(gt_dir)
     if environment and not gt.has_environment:
         raise InputError("the ground truth has no environment views", gt.folder / "environment" / CAMERAS_JSON,
@@ -260,9 +259,7 @@ def run_held_out(
     train_dir, out_dir = Path(train_dir), Path(out_dir)
     if downscale < 1:
         raise InputError(f"--downscale must be at least 1, got {downscale}")
-    weights = train_dir / MODEL
-    if not weights.is_file():
-        raise InputError("no trained model here", weights, "run `orca train` first (it writes model.pt when done)")
+    weights = model_file(train_dir)
     held = read_json(train_dir / TRAIN_REPORT).get("held_out") or []
     if not held:
         raise InputError("the model was trained on every photo: none was held out to compare with",

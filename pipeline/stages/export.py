@@ -45,14 +45,12 @@ import numpy as np
 from ..artifacts import atomic_dir, write_json, write_manifest
 from ..cameras import Camera, CameraSet, save_cameras, select_views
 from ..config import ExportConfig, add_config_arguments, config_from_arguments
-from ..errors import InputError
 from ..imageio import to_srgb8, write_png
 from ..layout import (
     CAMERAS_JSON,
     ENVIRONMENT,
     EXPORT_JSON,
     FLYTHROUGH_VIDEO,
-    MODEL,
     OBJECT_VIEWS,
     ORBIT_VIDEO,
     OVERVIEW,
@@ -64,7 +62,7 @@ from ..layout import (
 )
 from ..log import progress
 from ..media import depth_scale, normal_png, overview, write_environment_view, write_point_cloud, write_video
-from ..model_io import training_cameras
+from ..model_io import model_file, training_cameras
 from ..object_frame import camera_up
 from ..panorama import (
     environment_cameras,
@@ -99,9 +97,7 @@ def run_export(train_dir: Path, out_dir: Path, cfg: ExportConfig | None = None, 
     started = time.time()
     cfg = cfg if cfg is not None else ExportConfig()
     train_dir, out_dir = Path(train_dir), Path(out_dir)
-    weights = train_dir / MODEL
-    if not weights.is_file():
-        raise InputError("no trained model here", weights, "run `orca train` first (it writes model.pt when done)")
+    weights = model_file(train_dir)
     capture = common_capture([train_dir, cameras], force=True)  # --cameras of another capture: a warning
     train_cams, cams_from = training_cameras(train_dir, cameras)
     if train_cams is None:

@@ -25,9 +25,8 @@ import numpy as np
 
 from ..artifacts import atomic_dir, check_output_dir, write_json, write_manifest
 from ..config import MeshConfig, add_config_arguments, config_from_arguments, with_values
-from ..errors import InputError
 from ..imageio import linear_to_srgb
-from ..layout import MESH_COLMAP_PLY, MESH_FIGURE, MESH_PLY, MESH_REPORT, MODEL
+from ..layout import MESH_COLMAP_PLY, MESH_FIGURE, MESH_PLY, MESH_REPORT
 from ..meshing import (
     diffuse_colors,
     drop_small_components,
@@ -37,7 +36,7 @@ from ..meshing import (
     model_sdf,
     to_open3d,
 )
-from ..model_io import training_cameras
+from ..model_io import model_file, training_cameras
 from ..provenance import common_capture
 from ..rendering import load_renderer
 
@@ -54,9 +53,7 @@ def run_mesh(train_dir: Path, out_dir: Path, cfg: MeshConfig | None = None, *, c
     sources = [train_dir, *([cameras] if cameras else [])]
     check_output_dir(out_dir, "mesh", sources)
     capture = common_capture(sources, force=True)  # --cameras of another capture: only the frame is taken from it
-    weights = train_dir / MODEL
-    if not weights.is_file():
-        raise InputError("no trained model here", weights, "run `orca train` first (it writes model.pt when done)")
+    weights = model_file(train_dir)
     camera_set, cams_from = training_cameras(train_dir, cameras)
     if camera_set is None:
         log.info("no COLMAP-frame mesh: no training cameras (%s)", cams_from)
