@@ -31,7 +31,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from .alignment import Similarity
-from .artifacts import atomic_path, read_stage_json, write_json
+from .artifacts import read_stage_json, write_json
 from .cameras import Camera, CameraSet, as_matrix4, camera_problems
 from .errors import InputError
 
@@ -105,28 +105,6 @@ def nerfstudio_transforms(cameras: CameraSet, images: Mapping[str, str], masks: 
     if points_file is not None:
         doc["ply_file_path"] = points_file
     return doc
-
-
-def write_ply(path: str | Path, xyz: np.ndarray, rgb: np.ndarray) -> Path:
-    """Points ``(M, 3)`` with 8-bit colours ``(M, 3)`` as a binary PLY (double x, y, z; uchar red, green, blue), the
-    vertex layout open3d, nerfstudio and 3DGS read."""
-    xyz, rgb = np.asarray(xyz, np.float64).reshape(-1, 3), np.asarray(rgb, np.uint8).reshape(-1, 3)
-    if len(xyz) != len(rgb):
-        raise ValueError(f"{len(xyz)} points but {len(rgb)} colours")
-    vertex = np.empty(len(xyz), dtype=[("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("red", "u1"), ("green", "u1"),
-                                       ("blue", "u1")])
-    for k, axis in enumerate("xyz"):
-        vertex[axis] = xyz[:, k]
-    for k, channel in enumerate(("red", "green", "blue")):
-        vertex[channel] = rgb[:, k]
-    header = "".join([
-        "ply\nformat binary_little_endian 1.0\n", f"element vertex {len(xyz)}\n",
-        *(f"property double {a}\n" for a in "xyz"), *(f"property uchar {c}\n" for c in ("red", "green", "blue")),
-        "end_header\n"])
-    path = Path(path)
-    with atomic_path(path) as tmp:
-        tmp.write_bytes(header.encode("ascii") + vertex.tobytes())
-    return path
 
 
 @dataclass(frozen=True)

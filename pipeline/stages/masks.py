@@ -89,12 +89,13 @@ from ..masking.prior import PriorSphere, find_prior_sphere, in_sphere_frame, tou
 from ..masking.scale import full_size_mask, load_view, reduce
 from ..masking.segment import segment
 from ..masking.views import Plane, SegmentOptions, View
+from ..media import write_point_cloud
 from ..metrics import iou
 from ..object_frame import renormalized, sphere_from_masks
 from ..provenance import FORCE_HELP, check_capture_folder, common_capture
 from ..qa import contact_sheet, mask_overlay, tile, write_jpeg
 from ..results import DecodeArtifacts, image_folder, load_decode, relocated
-from ..transforms import from_colmap_frame, in_colmap_frame, nerfstudio_transforms, write_ply
+from ..transforms import from_colmap_frame, in_colmap_frame, nerfstudio_transforms
 from ..undistort import recorded_undistortion
 from ..user_masks import find_user_masks, refuse_empty, user_mask
 
@@ -141,6 +142,8 @@ def run_masks(
     # the poses stage's sparse points (COLMAP's frame), for nerfstudio's files; known cameras may have none
     sparse_files = model_files(model_folder(poses_dir / SPARSE)) if cameras.frame.to_colmap is not None else []
     sparse = model_points(poses_dir / SPARSE) if sparse_files else None
+    if sparse is not None and not len(sparse[0]):  # a model without points: no PLY, as the poses stage does
+        sparse = None
     user_dir = user_masks_dir
     if user_dir is None and config.user_masks == "auto" and capture_dir is not None:
         user_dir = Path(capture_dir) / USER_MASKS if (Path(capture_dir) / USER_MASKS).is_dir() else None
@@ -258,7 +261,7 @@ def run_masks(
         for cams, doc, ply in ((trained, TRANSFORMS_JSON, SPARSE_PLY),
                                (in_colmap_frame(trained), TRANSFORMS_COLMAP_JSON, SPARSE_PLY_COLMAP)):
             if sparse is not None:
-                write_ply(tmp / ply, from_colmap_frame(cams, sparse[0]), sparse[1])
+                write_point_cloud(tmp / ply, from_colmap_frame(cams, sparse[0]), sparse[1] / 255.0)
             write_json(tmp / doc, nerfstudio_transforms(cams, photos, {n: mask_file(n) for n in names},
                                                         ply if sparse is not None else None))
         report = _report(records, agreement, (centre, radius, sphere is not None), config, plane, rounds, warnings,

@@ -88,6 +88,7 @@ from ..layout import (
 )
 from ..log import collect_warnings
 from ..mask_file import read_mask
+from ..media import write_point_cloud
 from ..object_frame import ObjectSphere, Posed, find_object, normalized_cameras, normalizing_similarity
 from ..pose_checks import PoseChecks, frame_up_check
 from ..provenance import FORCE_HELP, check_capture_folder, common_capture
@@ -102,7 +103,7 @@ from ..sfm import (
     thumbnail,
     without_dropped,
 )
-from ..transforms import nerfstudio_transforms, write_ply
+from ..transforms import nerfstudio_transforms
 from ..undistort import UndistortMaps, pinholes, undistort_mask, undistortion, write_undistorted
 
 log = logging.getLogger("orca.poses")
@@ -210,7 +211,7 @@ def run_poses(
         points_n = to_source.inverse().apply(posed.points) if posed.points is not None else None
         has_points = points_n is not None and len(points_n) > 0 and posed.point_colors is not None
         if has_points:
-            write_ply(tmp / SPARSE_PLY, points_n, posed.point_colors)
+            write_point_cloud(tmp / SPARSE_PLY, points_n, posed.point_colors / 255.0)
         write_json(tmp / TRANSFORMS_JSON, nerfstudio_transforms(cameras, srgb_of,
                                                                 points_file=SPARSE_PLY if has_points else None))
         report = _report(posed, names, source, sphere, to_source, undistort, config, cameras)
