@@ -53,6 +53,7 @@ from .layout import (
     EVALUATE_JSON,
     EXPORT,
     EXPORT_JSON,
+    HELD_OUT_GRID,
     IMAGE_KINDS,
     MANIFEST,
     MASKS,
@@ -453,19 +454,21 @@ def load_export(folder: str | Path) -> ExportArtifacts:
 
 @dataclass(frozen=True)
 class EvaluateArtifacts:
-    """The evaluate stage's folder (a synthetic capture's): ``evaluate.json``, ``object_grid.png``,
-    ``environment_grid.png`` and the predicted views it compared (ground-truth frame, rendered size)."""
+    """The evaluate stage's folder: ``evaluate.json``, ``object_grid.png``, ``environment_grid.png`` and the
+    predicted views it compared (ground-truth frame, rendered size) of a synthetic capture; ``held_out_grid.png``
+    and the renders of the held-out photos of a real one (``orca evaluate --held-out``)."""
 
     folder: Path
 
     @cached_property
     def results(self) -> dict[str, Any]:
-        """``evaluate.json``: ``object``, ``environment`` (``views``, ``per_view``, ``mean``), ``poses``, ``mesh``,
-        ``definitions`` of every figure."""
+        """``evaluate.json``: ``object``, ``environment`` (``views``, ``per_view``, ``mean``), ``poses``, ``mesh``;
+        or ``held_out`` (the same keys); ``definitions`` of every figure."""
         return read_stage_json(self.folder / EVALUATE_JSON, EVALUATE)
 
     def means(self, part: str) -> dict[str, float | None]:
-        """The mean figures of ``part`` (``object`` or ``environment``); None where a figure is undefined."""
+        """The mean figures of ``part`` (``object``, ``environment`` or ``held_out``); None where a figure is
+        undefined."""
         return dict(self.results[part]["mean"])
 
     def object_view(self, name: str) -> dict[str, np.ndarray]:
@@ -477,8 +480,9 @@ class EvaluateArtifacts:
         return read_views(self.folder, f"env_{name}", self.folder / EVALUATE_JSON, EVALUATE)
 
     def grid(self, part: str) -> np.ndarray:
-        """``(H, W, 3|4)`` uint8: ground truth beside prediction for ``part`` (``object`` or ``environment``)."""
-        file = {"object": OBJECT_GRID, "environment": ENVIRONMENT_GRID}[part]
+        """``(H, W, 3|4)`` uint8: ground truth beside prediction for ``part`` (``object`` or ``environment``), or
+        photo, render and error of the held-out photos (``held_out``)."""
+        file = {"object": OBJECT_GRID, "environment": ENVIRONMENT_GRID, "held_out": HELD_OUT_GRID}[part]
         return _read_image_file(self.folder / file, read_image, self.folder / EVALUATE_JSON, EVALUATE)
 
 
@@ -548,7 +552,8 @@ class Results:
         """The artifacts of ``stage`` (one of :data:`pipeline.layout.STAGES` or ``report``)."""
         folder = self.folder / stage
         if not folder.is_dir():
-            what = "evaluate runs only on a synthetic capture (with ground_truth/); " if stage == EVALUATE else ""
+            what = ("evaluate runs on a synthetic capture (with ground_truth/) or one trained with "
+                    "train.holdout_every; " if stage == EVALUATE else "")
             raise InputError(f"the {stage} stage has not run: no {stage}/ folder", folder,
                              f"{what}run `orca {stage}` for this capture, or `snakemake --cores N` for every stage")
         return _LOADERS[stage](folder)

@@ -72,7 +72,7 @@ def test_the_notebook_draws_every_stage_of_the_tiny_results(tiny_results, tmp_pa
         "The model at a chosen camera, beside the photo": 1,
         "The mesh": 2,  # the decimated mesh in 3D, mesh.png
         "The environment from inside the object": 2,  # the views, the panorama
-        "Evaluation (a synthetic capture)": 2,  # the object and environment grids
+        "Evaluation": 2,  # the object and environment grids
         "The report": 0,
     }
     text = {h: s["text"] for h, s in sections.items()}
@@ -81,7 +81,7 @@ def test_the_notebook_draws_every_stage_of_the_tiny_results(tiny_results, tmp_pa
     assert "4 of 4 photos have a camera" in text["Poses: cameras and sparse points in 3D"]
     assert "no sparse points (known cameras, no model)" in text["Poses: cameras and sparse points in 3D"]
     assert "iterations in" in text["Training curves"]
-    assert "| normal MAE |" in text["Evaluation (a synthetic capture)"]
+    assert "| normal MAE |" in text["Evaluation"]
     assert str((results / "report" / "report.html").resolve()) in text["The report"]
 
 
@@ -108,5 +108,5 @@ def test_on_partial_results_the_notebook_says_what_to_run(tiny_capture, tiny_res
         assert sections[heading]["png"] == [], heading
         assert f"the {stage} stage has not run" in sections[heading]["text"] and f"orca {stage}" in \
             sections[heading]["text"], heading
-    assert "No evaluation" in sections["Evaluation (a synthetic capture)"]["text"]
+    assert "No evaluation" in sections["Evaluation"]["text"]
     assert "no report yet" in sections["The report"]["text"]

@@ -16,7 +16,7 @@ from pipeline.evaluation import held_out_figures
 from pipeline.imageio import read_exr
 from pipeline.mask_file import read_mask
 from pipeline.metrics import PSNR_CAP_DB
-from pipeline.results import load_decode
+from pipeline.results import load_decode, load_evaluate
 from pipeline.stages.evaluate import run_held_out
 from pipeline.stages.train import run_train
 
@@ -54,6 +54,7 @@ def test_held_out_photos_are_left_out_of_training_and_compared_with_the_renders(
                  str(gt / "masks"), "--out", str(out), "--device", "cpu"]) == 0
     result = read_json(out / "evaluate.json")["held_out"]
     assert result["views"] == names[::2] and (out / "held_out_grid.png").is_file()
+    assert load_evaluate(out).grid("held_out").ndim == 3  # the loader the notebook uses reads it
     decoded = load_decode(tiny_decode)
     for name in names[::2]:  # the figures are those of the written render against the photo
         render = read_exr(out / f"{name}_render.exr")
