@@ -81,8 +81,9 @@ def count_frames(path: Path) -> int:
 
 def extract_frames(video: Path, out_dir: Path, count: int) -> list[Path]:
     """The sharpest frame of each of ``count`` equal stretches of ``video`` written to ``out_dir`` as
-    ``<stem>_<k>.jpg`` (k from 1, zero-padded); the files written. One decoding pass; one frame per stretch in
-    memory. Existing files of those names are refused, not overwritten."""
+    ``<stem>_<k>.jpg`` (k from 1, zero-padded); the files written. ffmpeg counts the frames first (the stretches
+    need the exact number; a decode without conversion), then one pass keeps one frame per stretch in memory.
+    Existing files of those names are refused, not overwritten."""
     total = count_frames(video)
     meta, frames = read_frames(video)
     stretches = min(count, total)
