@@ -114,5 +114,5 @@ class ImageSet:
         origins, dirs, radii = camera_rays(uv, self.K[img], self.c2w[img])
         return Batch(
             origins=origins, dirs=dirs, radii=radii, rgb=self.images[img, row, col],
-            mask=self.masks[img, row, col].to(self.images.dtype), valid=self.valid[img, row, col],
+            mask=self.masks[img, row, col].to(self.images.dtype), valid=self.valid[img, row, col], photo=img,
         )

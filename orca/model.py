@@ -14,6 +14,7 @@ from typing import Literal, NamedTuple
 import torch
 from torch import nn
 
+from .appearance import appearance_prior, apply_gains, photo_gains
 from .differential import gradient
 from .fields import EnvironmentField, EnvironmentFieldSpec, SDFField, SDFFieldSpec
 from .geometry_utils import safe_normalize
@@ -52,6 +53,8 @@ class ModelSpec:
     # the object's centre: with samples right in front of the lens, the field can explain a photo's background
     # with a floater before its own camera (invisible to the others) instead of learning the room.
     background_near: float = 0.0
+    # Training photos with a learned exposure and white balance (orca.appearance); 0: none (one appearance).
+    photos: int = 0
 
 
 class OrcaModel(nn.Module):
@@ -61,10 +64,15 @@ class OrcaModel(nn.Module):
         self.sdf_field = SDFField(spec.sdf)
         self.env_field = EnvironmentField(spec.env)
         self.log_beta = nn.Parameter(torch.tensor(math.log(spec.beta_init - spec.beta_min)))
+        self.log_gains = nn.Parameter(torch.zeros(spec.photos, 3)) if spec.photos else None
 
     @property
     def beta(self) -> torch.Tensor:
         return self.spec.beta_min + self.log_beta.exp()
+
+    def photo_gains(self) -> torch.Tensor | None:
+        """``(photos, 3)`` each training photo's gain per channel (:func:`orca.appearance.photo_gains`), or None."""
+        return photo_gains(self.log_gains) if self.log_gains is not None else None
 
     @torch.no_grad()
     def apply_schedule(self, progress: float) -> None:
@@ -126,6 +134,7 @@ class LossWeights:
     clipped_excess: float = 0.1  # clipped pixels: weight of a prediction's excess over the recorded value
     smoothness: float = 0.0  # normals at the surface vs a small random step away (beyond the paper)
     smoothness_step: float = 0.01  # the step's standard deviation, in object radii
+    appearance: float = 0.01  # per-photo gains pulled toward their geometric mean (orca.appearance)
 
 
 class Batch(NamedTuple):
@@ -137,6 +146,7 @@ class Batch(NamedTuple):
     rgb: torch.Tensor  # (N, 3) linear target
     mask: torch.Tensor  # (N,) object mask in {0, 1}
     valid: torch.Tensor  # (N,) not clipped
+    photo: torch.Tensor | None = None  # (N,) long: the training photo of each ray (for its appearance)
 
 
 class DepthBatch(NamedTuple):
@@ -169,6 +179,7 @@ def objective(
     """
     # the warm-up uses geometry alone: the virtual cones (the environment along each) would be wasted
     out = model(batch.origins, batch.dirs, batch.radii, specular=phase == "joint")
+    gains = model.photo_gains() if batch.photo is not None else None
     obj = batch.mask > 0.5
     terms: dict[str, torch.Tensor] = {
         "mask": mask_loss(out.opacity, batch.mask),
@@ -179,6 +190,8 @@ def objective(
         # The surface's colour (radiance per unit opacity): otherwise the quickest way to darken a too-bright
         # start is to thin the surface, and the photometric term fights the silhouettes the mask term learns.
         surface_rgb = out.rgb / out.opacity.clamp_min(_OPACITY_EPS)[:, None]
+        if gains is not None:
+            surface_rgb = apply_gains(surface_rgb, gains, batch.photo)
         terms["photometric"] = photometric_loss(
             surface_rgb, batch.rgb, obj & batch.valid, obj & ~batch.valid, weights.clipped_excess
         )
@@ -192,20 +205,30 @@ def objective(
         )
         terms["free_space"] = opacity.mean()
     if weights.background > 0:
-        rays = [tuple(t[~obj] for t in (batch.origins, batch.dirs, batch.radii, batch.rgb, batch.valid))]
+        rays = [tuple(t[~obj] for t in _background_parts(batch, gains))]
         if background is not None:
-            rays.append((background.origins, background.dirs, background.radii, background.rgb, background.valid))
-        origins, dirs, radii, rgb, valid = (torch.cat(parts) for parts in zip(*rays))
+            rays.append(_background_parts(background, gains))
+        origins, dirs, radii, rgb, valid, photo = (torch.cat(parts) for parts in zip(*rays))
         if origins.shape[0]:
             near = model.spec.background_near * origins.norm(dim=-1)  # the object's centre is the origin
             env_rgb, _ = model.environment(origins, dirs, radii, near)
+            if gains is not None:
+                env_rgb = apply_gains(env_rgb, gains, photo)
             terms["background"] = photometric_loss(env_rgb, rgb, valid, ~valid, weights.clipped_excess)
     if weights.sparse_depth > 0 and depth is not None and not model.env_field.directional:
         w, edges, _ = environment_weights(model.env_field, depth.origins, depth.dirs, depth.radii,
                                           torch.zeros_like(depth.radii), model.spec.render)
         terms["sparse_depth"] = sparse_depth_loss(w, edges, depth.distance, weights.sparse_depth_band * depth.distance)
+    if gains is not None:
+        terms["appearance"] = appearance_prior(model.log_gains)
     total = sum(getattr(weights, k) * v for k, v in terms.items())
     return total, {k: v.detach() for k, v in terms.items()}, out
+
+
+def _background_parts(batch: Batch, gains: torch.Tensor | None) -> tuple[torch.Tensor, ...]:
+    """What the background term reads of a batch: its rays, targets and (with gains) photo indices."""
+    photo = batch.photo if gains is not None else torch.zeros_like(batch.radii, dtype=torch.long)
+    return batch.origins, batch.dirs, batch.radii, batch.rgb, batch.valid, photo
 
 
 def smoothness_term(model: OrcaModel, batch: Batch, out: RayOutputs, step: float) -> torch.Tensor:

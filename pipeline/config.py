@@ -344,6 +344,10 @@ class LossConfig(StrictModel):
     sparse_depth_band: float = Field(0.03, gt=0, lt=1, description="... within this share of the point's distance")
     smoothness: float = Field(0.1, ge=0, description="normals at the surface vs a small random step away")
     smoothness_step: float = Field(0.01, gt=0, description="that step's standard deviation (object radii)")
+    appearance: float = Field(
+        0.01, ge=0, description="each photo's learned exposure and white balance (train.appearance) pulled toward "
+        "the photos' average: keeps the gains of photos that show little from drifting"
+    )
 
 
 class HashGridConfig(StrictModel):
@@ -491,6 +495,11 @@ class TrainConfig(StrictModel):
     holdout_every: int = Field(
         0, ge=0, description="hold every k-th photo (name order, from the first: LLFF's convention) out of training, "
         "for `orca evaluate --held-out` to compare the model's renders with photos it never saw; 0: train on all"
+    )
+    appearance: Literal["auto"] | bool = Field(
+        "auto", description="learn each photo's exposure and white balance (a gain per colour channel; "
+        "orca/appearance.py), so the fields are not painted with each photo's tint: true / false, or auto: true "
+        "unless every photo is RAW (decoded with one white balance and its EXIF exposure)"
     )
     sdf: SDFConfig = Field(default_factory=SDFConfig)
     environment: EnvironmentConfig = Field(default_factory=EnvironmentConfig)

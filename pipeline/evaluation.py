@@ -19,6 +19,7 @@ from .metrics import (
     SSIM_WINDOW,
     depth_errors,
     iou,
+    matching_gains,
     normal_angular_error,
     psnr_linear,
     psnr_srgb,
@@ -51,6 +52,8 @@ LABELS = {  # metric -> (label, unit, which way is better)
     "prop_depth_absrel": ("prop depth AbsRel", "", "lower"), "prop_depth_rmse": ("prop depth RMSE", "units", "lower"),
     "psnr_srgb_object": ("PSNR object (sRGB)", "dB", "higher"), "ssim_object": ("SSIM object", "", "higher"),
     "psnr_srgb_frame": ("PSNR whole frame (sRGB)", "dB", "higher"), "ssim_frame": ("SSIM whole frame", "", "higher"),
+    "psnr_srgb_object_matched": ("PSNR object, gains matched (sRGB)", "dB", "higher"),
+    "psnr_srgb_frame_matched": ("PSNR whole frame, gains matched (sRGB)", "dB", "higher"),
 }
 
 DEFINITIONS = {
@@ -93,7 +96,10 @@ DEFINITIONS = {
              "centre); ground-truth cameras the result lacks are listed, not counted",
     "held_out": "photos the model was not trained on (train.holdout_every) against its render of their cameras "
                 "(the object over the environment field), in decoded units: sRGB PSNR and SSIM as above over the "
-                "object (the masks stage's mask) and over the whole frame, highlight-clipped pixels left out",
+                "object (the masks stage's mask) and over the whole frame, highlight-clipped pixels left out; "
+                "*_matched: the same PSNRs after the render is scaled by the gain per colour channel that best maps it "
+                "onto the photo over the frame (least squares, linear): the photo's own exposure and white balance, "
+                "which a model trained on other photos cannot know (train.appearance)",
     "mesh": "the mesh moved into the ground-truth frame against ground_truth/object.ply by open3d compute_metrics: "
             f"{MESH_SAMPLES} points sampled on each surface, distances to the other surface by ray casting; "
             "Chamfer = the sum of the two mean distances, Hausdorff distance, F-score in [0, 1] at "
@@ -211,7 +217,8 @@ def summary_tables(results: dict[str, Any]) -> list[Any]:
     return tables
 
 
-HELD_OUT_METRICS = ("psnr_srgb_object", "ssim_object", "psnr_srgb_frame", "ssim_frame")
+HELD_OUT_METRICS = ("psnr_srgb_object", "ssim_object", "psnr_srgb_frame", "ssim_frame", "psnr_srgb_object_matched",
+                    "psnr_srgb_frame_matched")
 
 
 def held_out_figures(render: np.ndarray, photo: np.ndarray, mask: np.ndarray, valid: np.ndarray) -> dict[str, Any]:
@@ -220,6 +227,10 @@ def held_out_figures(render: np.ndarray, photo: np.ndarray, mask: np.ndarray, va
     object (``mask`` ``(H, W)``, the masks stage's) and over the whole frame, highlight-clipped pixels (``valid``
     false) left out of both: the photo does not record them."""
     obj, frame = mask & valid, valid
+    gains = matching_gains(render[frame], photo[frame])
+    matched = render * gains
     return {"psnr_srgb_object": psnr_srgb(render, photo, obj), "ssim_object": ssim(render, photo, obj),
             "psnr_srgb_frame": psnr_srgb(render, photo, frame), "ssim_frame": ssim(render, photo, frame),
+            "psnr_srgb_object_matched": psnr_srgb(matched, photo, obj),
+            "psnr_srgb_frame_matched": psnr_srgb(matched, photo, frame), "gains": gains.tolist(),
             "pixels": {"object": int(obj.sum()), "frame": int(frame.sum())}}

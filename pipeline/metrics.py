@@ -59,6 +59,14 @@ def psnr_srgb(pred: np.ndarray, gt: np.ndarray, mask: np.ndarray | None = None, 
     return psnr(tone_map(pred, peak), tone_map(gt, peak), mask, 1.0)
 
 
+def matching_gains(pred: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """The gain per channel ``(3,)`` that best maps ``pred`` onto ``target`` (both ``(M, 3)``, linear) in the
+    least-squares sense; 1 for a channel ``pred`` is black in."""
+    num = (pred * target).sum(axis=0, dtype=np.float64)
+    den = np.square(pred).sum(axis=0, dtype=np.float64)
+    return np.where(den > 0, num / np.maximum(den, np.finfo(np.float64).tiny), 1.0).astype(np.float32)
+
+
 def ssim(pred: np.ndarray, gt: np.ndarray, mask: np.ndarray | None = None, peak: float = PSNR_PEAK,
          window: int = SSIM_WINDOW) -> float:
     """Mean SSIM (kornia, Gaussian window, sigma 1.5) over the ``mask`` pixels of ``pred`` and ``gt``

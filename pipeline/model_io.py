@@ -16,8 +16,9 @@ from .errors import InputError, OrcaError
 from .layout import MANIFEST, MODEL
 
 
-def model_spec(cfg: TrainConfig):
-    """The ``orca.model.ModelSpec`` a train config describes."""
+def model_spec(cfg: TrainConfig, photos: int = 0):
+    """The ``orca.model.ModelSpec`` a train config describes, with a learned appearance for ``photos`` training
+    photos (0: none)."""
     from orca.encoding import HashGridSpec
     from orca.fields import EnvironmentFieldSpec, SDFFieldSpec
     from orca.model import ModelSpec
@@ -39,7 +40,7 @@ def model_spec(cfg: TrainConfig):
         render=RenderSpec(**render.model_dump(exclude={"env_far_from_points"})),
         beta_init=sdf.beta_init, beta_final=sdf.beta_final, beta_anneal=sdf.beta_anneal,
         sdf_levels_start=sdf.levels_start, sdf_levels_full=sdf.levels_full,
-        background_near=cfg.sampler.background_near,
+        background_near=cfg.sampler.background_near, photos=photos,
     )
 
 
@@ -47,6 +48,15 @@ def loss_weights(cfg: TrainConfig):
     from orca.model import LossWeights
 
     return LossWeights(**cfg.losses.model_dump())
+
+
+def appearance_record(model, names: list[str]) -> dict[str, list[float]] | None:
+    """Each training photo's learned gain per channel (linear RGB, relative to the photos' geometric mean),
+    or None when training learned one appearance for all."""
+    gains = model.photo_gains()
+    if gains is None:
+        return None
+    return {name: [round(float(g), 5) for g in row] for name, row in zip(names, gains.detach().cpu().tolist())}
 
 
 def resolve_device(name: str):
@@ -87,7 +97,9 @@ def load_model(train_dir: Path, device: str = "cpu"):
     path = model_file(train_dir)
     state = load_checkpoint(path)
     cfg = TrainConfig.model_validate_json(state["config"])
-    model = OrcaModel(model_spec(cfg))
+    # the learned appearance has one row per training photo: the count is the saved tensor's
+    gains = state["model"].get("log_gains")
+    model = OrcaModel(model_spec(cfg, photos=0 if gains is None else int(gains.shape[0])))
     load_weights(model, state, path)
     return model.to(device).eval()
 

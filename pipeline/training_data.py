@@ -23,6 +23,15 @@ def held_out(names: Sequence[str], every: int) -> list[str]:
     return list(names[::every]) if every else []
 
 
+def learns_appearance(decode_dir: Path, names: Sequence[str], mode: bool | str) -> bool:
+    """Whether training learns each photo's exposure and white balance (``train.appearance``): ``"auto"`` does
+    unless every one of ``names`` was decoded from RAW (one white balance, exposure from EXIF)."""
+    if mode != "auto":
+        return bool(mode)
+    decoded = load_decode(decode_dir)
+    return any(decoded.entry(name).get("format") != "raw" for name in names)
+
+
 def posed_names(decode_dir: Path, cameras_path: Path) -> list[str]:
     """The decoded images that have a camera in ``cameras_path``, in decode's order."""
     cams = load_cameras(cameras_path).by_name()

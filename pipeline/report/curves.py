@@ -1,4 +1,5 @@
-"""The training curves of the report: ``metrics.jsonl`` (one JSON object a logged step) and its figure."""
+"""The training figures of the report: ``metrics.jsonl`` (one JSON object a logged step) and its curves, and
+the photos' learned appearance."""
 
 from __future__ import annotations
 
@@ -88,4 +89,29 @@ def training_curves(rows: list[dict[str, Any]]):
         a.grid(alpha=0.3)
         if joint is not None and len(steps) and joint > steps.min():
             a.axvline(joint, color="k", lw=0.8, ls=":")
+    return fig
+
+
+def appearance_figure(gains: dict[str, list[float]]):
+    """A matplotlib figure of each training photo's learned appearance (``{name: [r, g, b]}`` gains relative to
+    the photos' geometric mean): its exposure in stops (the gains' geometric mean) and its white balance as
+    the red and blue gains over the green."""
+    from matplotlib.figure import Figure
+
+    names = list(gains)
+    g = np.array([gains[n] for n in names], np.float64)
+    x = np.arange(len(names))
+    fig = Figure(figsize=(11, 3.2))
+    ax = fig.subplots()
+    fig.subplots_adjust(left=0.07, right=0.93, bottom=0.3, top=0.9)
+    ax.bar(x, np.log2(g).mean(axis=1), color="0.6", label="exposure (stops)")
+    ax.set_ylabel("exposure (stops)")
+    ax.axhline(0, color="0.3", linewidth=0.6)
+    balance = ax.twinx()
+    balance.plot(x, g[:, 0] / g[:, 1], "o-", color="tab:red", markersize=3, label="red / green gain")
+    balance.plot(x, g[:, 2] / g[:, 1], "o-", color="tab:blue", markersize=3, label="blue / green gain")
+    balance.set_ylabel("white balance (gain ratio)")
+    ax.set_xticks(x, names, rotation=90, fontsize=6)
+    ax.set_xlim(-0.6, len(names) - 0.4)
+    fig.legend(loc="upper right", fontsize=7, ncol=3)
     return fig

@@ -54,7 +54,7 @@ from ..layout import (
     TRAIN_REPORT,
     VIDEOS,
 )
-from .curves import read_metrics, training_curves
+from .curves import appearance_figure, read_metrics, training_curves
 from .page import duration, text
 from .reader import Reader
 
@@ -244,7 +244,7 @@ def section_train(reader: Reader, folder: Path) -> tuple[str, Data]:
     config = reader.json(folder / TRAIN_CONFIG, required=False)
     config = dotted(config) if isinstance(config, dict) else None  # the train config's groups as sdf.hidden, ...
     data: Data = {"losses": [], "curves": None, "last": None, "bad": 0, "metrics": folder / METRICS,
-                  "metrics_state": "ok", "preview": None,
+                  "metrics_state": "ok", "preview": None, "appearance": None,
                   "config": sorted(config.items()) if isinstance(config, dict) else [],
                   "tensorboard": folder / TENSORBOARD}
     if isinstance(report, dict):
@@ -261,6 +261,10 @@ def section_train(reader: Reader, folder: Path) -> tuple[str, Data]:
             rows += [(k, config.get(k, ...)) for k in ("batch_rays", "mask_warmup", "lr", "sdf.encoding")]
         data["rows"] = rows
         data["losses"] = sorted((report.get("final_losses") or {}).items())
+        gains = report.get("appearance")
+        if isinstance(gains, dict) and gains:
+            data["appearance"] = reader.figure(appearance_figure(gains), "each training photo's learned exposure "
+                                               "and white balance, relative to the photos' average (train.appearance)")
         summary = f"{report.get('iterations')} iterations, {duration(report.get('training_seconds'))}"
     else:
         data["unreadable"] = folder / TRAIN_REPORT
@@ -434,7 +438,9 @@ def section_evaluate(reader: Reader, folder: Path) -> tuple[str, Data]:
                                                HELD_OUT_GRID)
     if isinstance(means.get("psnr_srgb_object"), int | float):
         summary.append(f"held-out photos: object {means['psnr_srgb_object']:.1f} dB, frame "
-                       f"{text(means.get('psnr_srgb_frame'))} dB (sRGB)")
+                       f"{text(means.get('psnr_srgb_frame'))} dB (sRGB; with each photo's gains matched: "
+                       f"{text(means.get('psnr_srgb_object_matched'))} / {text(means.get('psnr_srgb_frame_matched'))}"
+                       " dB)")
     poses = results.get("poses")
     if isinstance(poses, dict):
         s = poses.get("summary") or {}

@@ -41,10 +41,10 @@ from ..layout import (
     TRAIN_CONFIG,
     TRAIN_REPORT,
 )
-from ..model_io import model_spec, resolve_device, save_model
+from ..model_io import appearance_record, model_spec, resolve_device, save_model
 from ..provenance import FORCE_HELP, common_capture
 from ..training import train, with_far_from_points
-from ..training_data import held_out, load_image_set, posed_names
+from ..training_data import held_out, learns_appearance, load_image_set, posed_names
 
 log = logging.getLogger("orca.train")
 
@@ -108,7 +108,10 @@ def run_train(
     if cfg.losses.sparse_depth > 0 and data.depth is None:
         log.warning("train.losses.sparse_depth is %g but no sparse points were given (--points): the term is off",
                     cfg.losses.sparse_depth)
-    model = OrcaModel(model_spec(cfg)).to(device)
+    appearance = learns_appearance(decode_dir, names, cfg.appearance)
+    if appearance:
+        log.info("train: learning each photo's exposure and white balance (train.appearance %s)", cfg.appearance)
+    model = OrcaModel(model_spec(cfg, photos=len(names) if appearance else 0)).to(device)
     run = train(data, model, cfg, ckpt_dir, restart=restart, max_steps=max_steps)
     if run.step < cfg.iterations:
         return None
@@ -125,6 +128,7 @@ def run_train(
             "seconds_this_run": round(run.seconds, 2), "training_seconds": round(run.seconds_total, 2),
             "final_losses": run.final_losses, "beta": model.beta.item(),
             "sparse_depth_pixels": len(data.depth) if data.depth is not None else 0,
+            "appearance": appearance_record(model, names),
         })
         write_manifest(tmp, stage="train", inputs={"cameras": cameras_path, "decode": decode_dir / DECODE_JSON},
                        config=cfg.model_dump(), started=started, capture=capture)

@@ -39,6 +39,11 @@ def test_held_out_figures_of_a_perfect_render_and_of_one_wrong_on_the_object():
     assert f["psnr_srgb_object"] < f["psnr_srgb_frame"] < PSNR_CAP_DB and f["ssim_object"] < f["ssim_frame"]
     # clipped pixels are not compared: a wrong object that is all clipped counts as right
     assert held_out_figures(wrong, photo, mask, ~mask)["psnr_srgb_frame"] == PSNR_CAP_DB
+    # a photo exposed and white-balanced otherwise than the render: the matched figures see through it
+    tinted = held_out_figures(photo * np.array([1.4, 1.0, 0.7], np.float32), photo, mask, valid)
+    assert tinted["psnr_srgb_frame"] < 25 and tinted["psnr_srgb_frame_matched"] > 50
+    assert tinted["gains"] == pytest.approx([1 / 1.4, 1.0, 1 / 0.7], rel=1e-4)
+    assert f["psnr_srgb_object_matched"] < f["psnr_srgb_frame_matched"] < PSNR_CAP_DB
 
 
 def test_held_out_photos_are_left_out_of_training_and_compared_with_the_renders(tiny_capture, tiny_decode, tmp_path):

@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 from dataclasses import replace
 
+import cv2
 import numpy as np
 import pytest
 import torch
@@ -158,6 +159,33 @@ def test_training_lowers_the_loss_on_the_tiny_capture(tiny_capture, tiny_decode,
     rows = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
     mask = np.array([r["mask"] for r in rows])
     assert mask[15:20].mean() < 0.7 * mask[:5].mean(), "the silhouette warm-up lowers the mask loss"
+
+
+def test_a_learned_appearance_is_reported_per_photo_and_loads_with_the_model(tiny_capture, tiny_decode, tmp_path):
+    """train.appearance: a gain per channel and training photo, written to train_report.json (geometric mean 1)
+    and into model.pt, from which the model loads; auto learns one for JPEG photos, not for RAW ones."""
+    from pipeline.results import load_decode
+    from pipeline.training_data import learns_appearance
+
+    gt = tiny_capture / "ground_truth"
+    out = tmp_path / "train"
+    run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, _cfg("train.appearance=true"))
+    report = json.loads((out / "train_report.json").read_text())
+    gains = np.array([report["appearance"][n] for n in report["images"]])
+    assert gains.shape == (4, 3) and np.allclose(np.log(gains).mean(axis=0), 0, atol=1e-4)
+    assert not np.allclose(gains, 1), "six steps of training moved them"
+    model = load_model(out)
+    assert torch.allclose(model.photo_gains(), torch.tensor(gains, dtype=torch.float32), atol=1e-4)
+
+    names = report["images"]
+    assert not learns_appearance(tiny_decode, names, "auto") and learns_appearance(tiny_decode, names, True)
+    photos = tmp_path / "jpegs"
+    (photos / "images").mkdir(parents=True)
+    for name in names:  # the same photos as 8-bit JPEGs
+        cv2.imwrite(str(photos / "images" / f"{name}.jpg"), load_decode(tiny_decode).srgb(name)[..., ::-1])
+    run_decode(photos, tmp_path / "decode_jpeg", DecodeConfig())
+    assert learns_appearance(tmp_path / "decode_jpeg", names, "auto")
+    assert not learns_appearance(tmp_path / "decode_jpeg", names, False)
 
 
 @pytest.mark.slow
