@@ -1,4 +1,4 @@
-"""The report's figures (pipeline.report): training curves from a long metrics log."""
+"""The report's figures (pipeline.report): training curves from a long metrics log, the photos' appearance."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from helpers import png_data_uri_image
 
-from pipeline.report.curves import read_metrics, training_curves
+from pipeline.report.curves import appearance_figure, read_metrics, training_curves
 from pipeline.report.reader import figure_data_uri
 
 
@@ -29,3 +29,14 @@ def test_training_curves_from_a_long_metrics_log(tmp_path):
     assert np.nanmax(psnr.lines[0].get_ydata()) == pytest.approx(10 + 300 / 20)
     assert any(np.allclose(line.get_xdata(), 51)
                for a in fig.axes for line in a.lines[1:] if len(line.get_xdata()) == 2)
+
+
+def test_the_appearance_figure_shows_each_photos_exposure_and_white_balance():
+    gains = {"IMG_1": [2.0, 2.0, 2.0], "IMG_2": [0.5, 0.5, 0.5], "IMG_3": [1.2, 1.0, 0.8]}
+    fig = appearance_figure(gains)
+    stops, balance = fig.axes[0], fig.axes[1]
+    assert [b.get_height() for b in stops.patches] == pytest.approx([1.0, -1.0, np.log2([1.2, 1.0, 0.8]).mean()])
+    red, blue = balance.lines
+    assert red.get_ydata() == pytest.approx([1.0, 1.0, 1.2]) and blue.get_ydata() == pytest.approx([1.0, 1.0, 0.8])
+    assert [t.get_text() for t in stops.get_xticklabels()] == list(gains)
+    assert png_data_uri_image(figure_data_uri(fig)).shape[1] > 600

@@ -176,6 +176,11 @@ def test_a_learned_appearance_is_reported_per_photo_and_loads_with_the_model(tin
     assert not np.allclose(gains, 1), "six steps of training moved them"
     model = load_model(out)
     assert torch.allclose(model.photo_gains(), torch.tensor(gains, dtype=torch.float32), atol=1e-4)
+    from pipeline.report.reader import Reader
+    from pipeline.report.sections import section_train
+
+    _, section = section_train(Reader(tmp_path, tmp_path / "page"), out)
+    assert section["appearance"].uri.startswith("data:image/png")  # the report plots them
 
     names = report["images"]
     assert not learns_appearance(tiny_decode, names, "auto") and learns_appearance(tiny_decode, names, True)
