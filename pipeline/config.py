@@ -488,6 +488,11 @@ class TrainConfig(StrictModel):
     batch_rays: int = Field(2048, ge=8)
     mask_warmup: int = Field(1000, ge=0, description="iterations of silhouette-only training first")
     lr: float = Field(5e-3, gt=0)
+    appearance_lr: float = Field(
+        0.05, gt=0, description="learning rate of the per-photo gains (train.appearance; decays as train.lr does): "
+        "ten times the fields', or a gain's log moves at most ~lr a step and a stop's difference takes most of a "
+        "short training"
+    )
     lr_final_ratio: float = Field(0.05, gt=0, le=1, description="exponential decay to lr x ratio at the end")
     grad_clip: float = Field(1.0, gt=0)
     device: Literal["auto", "cpu", "cuda"] = "auto"

@@ -71,6 +71,14 @@ def with_far_from_points(cfg: TrainConfig, data, points_dir: Path | None) -> Tra
     return cfg.model_copy(update={"render": render.model_copy(update={"env_far": round(far, 4)})})
 
 
+def parameter_groups(model, cfg: TrainConfig) -> list[dict]:
+    """The optimizer's parameter groups: the fields and β at ``cfg.lr``, the per-photo gains (if the model
+    learns them) at ``cfg.appearance_lr``."""
+    gains = model.log_gains
+    fields = [p for p in model.parameters() if p is not gains]
+    return [{"params": fields}] + ([{"params": [gains], "lr": cfg.appearance_lr}] if gains is not None else [])
+
+
 def train(data, model, cfg: TrainConfig, ckpt_dir: Path, *, restart: bool = False,
           max_steps: int | None = None) -> Training:
     """Fit ``model`` (on its device) to ``data`` (an ``orca.data.ImageSet`` on the CPU: its hash is part of
@@ -87,7 +95,7 @@ def train(data, model, cfg: TrainConfig, ckpt_dir: Path, *, restart: bool = Fals
 
     identity = training_identity(cfg, data)
     data = data.to(next(model.parameters()).device)
-    optimizer = torch.optim.Adam(model.parameters(), lr=cfg.lr, eps=1e-15)
+    optimizer = torch.optim.Adam(parameter_groups(model, cfg), lr=cfg.lr, eps=1e-15)
     decay = math.log(cfg.lr_final_ratio) / cfg.iterations
     scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda it: math.exp(decay * it))
     weights = loss_weights(cfg)
