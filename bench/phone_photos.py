@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import json
 import subprocess
+import sys
 import tempfile
 import time
 from collections.abc import Sequence
@@ -33,9 +34,11 @@ from typing import Any
 import numpy as np
 from PIL import Image
 
-from bench.blowtorch import DATASET, ORCA, commit, machine, select_photos
-from pipeline.imageio import linear_to_srgb, srgb_to_linear
-from pipeline.layout import CAPTURE_YAML, LLFF_IMAGE_NAMES, PHOTO_SUBDIR, POSES_BOUNDS, USER_MASKS
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: bench.blowtorch
+
+from bench.blowtorch import DATASET, ORCA, commit, machine, select_photos  # noqa: E402
+from pipeline.imageio import linear_to_srgb, srgb_to_linear  # noqa: E402
+from pipeline.layout import CAPTURE_YAML, LLFF_IMAGE_NAMES, PHOTO_SUBDIR, POSES_BOUNDS, USER_MASKS  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "phone_photos.jsonl"
 STOPS = 0.7  # exposures within +-0.7 stop of the photos' average: what auto-exposure leaves between neighbours
