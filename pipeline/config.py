@@ -142,6 +142,11 @@ class PosesConfig(StrictModel):
     max_image_size: int = Field(
         1600, ge=0, description="SIFT runs on images downscaled to this longest side (0: full size)."
     )
+    sift_brightness: float = Field(
+        0.45, ge=0, lt=1, description="SIFT sees each photo in grey scaled so that its median is this (0..1): photos "
+        "exposure normalization made darker or brighter by stops keep their features (0: the decoded photos as they "
+        "are)."
+    )
     max_num_features: int = Field(8192, ge=64, description="SIFT features kept per image.")
     min_features: int = Field(
         50, ge=1, description="an image with fewer SIFT features than this counts as featureless."
@@ -262,6 +267,11 @@ class MasksConfig(StrictModel):
         3, ge=1, description="a pixel is explained by a surface when this many neighbours agree (occlusion-robust)"
     )
     floor: bool = Field(True, description="find the support plane and take the floor around the object as background")
+    match_exposure: bool = Field(
+        True, description="before comparing two photos for photo-consistency (support plane, depth sweeps), bring "
+        "one to the other's exposure and white balance by per-channel gains (the ratio of their medians where they "
+        "overlap): photos of one capture often differ by stops and in tint"
+    )
     floor_threshold: float = Field(
         0.03, gt=0, lt=1, description="mean absolute sRGB difference (0..1, 5x5 box) under which the plane explains "
         "a pixel"

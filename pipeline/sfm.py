@@ -242,6 +242,8 @@ def run_sfm(
     pycolmap.set_random_seed(config.seed)
 
     t = time.time()
+    sift_dir = image_dir if not config.sift_brightness else \
+        write_sift_images(image_dir, names, work / "sift_images", config.sift_brightness)
     extraction = pycolmap.FeatureExtractionOptions()
     extraction.num_threads = threads
     extraction.max_image_size = config.max_image_size or -1
@@ -257,9 +259,9 @@ def run_sfm(
         if feature_masks is not None:
             reader.mask_path = str(feature_masks)
         colmap_names = [colmap_name(n) for n in g.names]
-        pycolmap.import_images(db_path, image_dir, pycolmap.CameraMode.SINGLE, colmap_names, reader)
+        pycolmap.import_images(db_path, sift_dir, pycolmap.CameraMode.SINGLE, colmap_names, reader)
         pycolmap.extract_features(
-            db_path, image_dir, image_names=colmap_names, camera_mode=pycolmap.CameraMode.SINGLE,
+            db_path, sift_dir, image_names=colmap_names, camera_mode=pycolmap.CameraMode.SINGLE,
             reader_options=reader, extraction_options=extraction, device=pycolmap.Device.auto,
         )
     features = _feature_counts(db_path)
@@ -439,6 +441,27 @@ def _verified_pairs(db_path: Path, min_inliers: int) -> int:
         return sum(len(g.inlier_matches) >= min_inliers for g in geometries)
     finally:
         db.close()
+
+
+def equalized_gray(image: np.ndarray, target: float, max_gain: float = 8.0) -> np.ndarray:
+    """``(H, W)`` uint8 grey of ``image`` (``(H, W)`` or ``(H, W, 3)`` uint8) scaled so that its median is
+    ``target`` (0..1), the gain within ``[1/max_gain, max_gain]``. SIFT keeps a feature only above a fixed
+    contrast: in a photo exposure normalization darkened by stops (or a camera under-exposed) most of the
+    background's features fall under it, and that photo stops matching its brighter neighbours."""
+    import cv2
+
+    gray = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
+    gain = np.clip(255.0 * target / max(float(np.median(gray)), 1.0), 1.0 / max_gain, max_gain)
+    return cv2.convertScaleAbs(gray, alpha=gain)
+
+
+def write_sift_images(image_dir: Path, names: Sequence[str], out: Path, target: float) -> Path:
+    """``out/<name>.png``: each photo of ``image_dir`` as :func:`equalized_gray` gives it (SIFT's input)."""
+    out.mkdir(parents=True, exist_ok=True)
+    for n in names:
+        image = imageio.read_image(image_dir / colmap_name(n))
+        imageio.write_png(out / colmap_name(n), equalized_gray(image, target))
+    return out
 
 
 def _read_gray(path: Path) -> np.ndarray:

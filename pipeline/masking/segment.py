@@ -108,7 +108,8 @@ def gather_evidence(views: Sequence[View], opts: SegmentOptions, fixed: dict[int
         else:
             occluded.append(None)
         if plane is not None:
-            cost = plane_cost(v, [views[j] for j in nbrs[i]], plane.normal, plane.offset, opts.consistency_rank)
+            cost = plane_cost(v, [views[j] for j in nbrs[i]], plane.normal, plane.offset, opts.consistency_rank,
+                              match_exposure=opts.match_exposure)
             floors.append(floor_from_cost(cost, outside, opts))
             above.append((cost > opts.not_floor_threshold) & ~outside)
         else:

@@ -17,11 +17,29 @@ log = logging.getLogger("orca.masks")
 CHANNEL_MEAN = np.full((1, 3), 1.0 / (3 * 255), np.float32)  # 8-bit RGB difference -> mean over channels, 0..1
 
 
+def exposure_gains(image: np.ndarray, warped: np.ndarray, seen: np.ndarray, min_pixels: int = 200,
+                   stride: int = 4, limit: float = 8.0) -> np.ndarray:
+    """``(3,)`` float32 per-channel gains that bring ``warped`` (another photo resampled into ``image``'s grid,
+    both ``(h, w, 3)`` uint8) to ``image``'s exposure and white balance: the ratio of their medians over the
+    pixels both see (``seen`` ``(h, w)`` bool; every ``stride``-th row and column). Photos of one capture often
+    differ by stops (auto exposure, changed settings) and in tint (auto white balance); a ratio of medians is
+    robust to the parts of the overlap that do not match. 1 where fewer than ``min_pixels`` are seen; clamped to
+    ``[1/limit, limit]``."""
+    pick = seen[::stride, ::stride]
+    if np.count_nonzero(pick) < min_pixels:
+        return np.ones(3, np.float32)
+    a = np.median(image[::stride, ::stride][pick], axis=0)
+    b = np.median(warped[::stride, ::stride][pick], axis=0)
+    return np.clip((a + 1.0) / (b + 1.0), 1.0 / limit, limit).astype(np.float32)
+
+
 def plane_cost(view: View, others: Sequence[View], normal: np.ndarray, offset: float, rank: int,
-               window: int = 5, box: tuple[int, int, int, int] | None = None, min_views: int = 2) -> np.ndarray:
+               window: int = 5, box: tuple[int, int, int, int] | None = None, min_views: int = 2,
+               match_exposure: bool = True) -> np.ndarray:
     """``(h, w)`` float32 over ``box`` (default: the whole image): how badly the plane ``normal . x = offset``
     explains each pixel -- the ``rank``-th smallest (1-based) over the neighbours of the mean absolute sRGB
-    difference (0..1) over a ``window`` box.
+    difference (0..1) over a ``window`` box; each neighbour first brought to the view's exposure and white
+    balance (:func:`exposure_gains`) when ``match_exposure``.
 
     Only neighbours that see the plane's point count: it must land inside their image. With fewer such neighbours
     than ``rank`` the rank drops to their number; with fewer than ``min_views`` the cost is ``inf`` (no
@@ -43,6 +61,8 @@ def plane_cost(view: View, others: Sequence[View], normal: np.ndarray, offset: f
         seen = cv2.warpPerspective(visible, H, size, flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
                                    borderMode=cv2.BORDER_CONSTANT, borderValue=0)
         seen = cv2.erode(seen, erode) > 0  # the whole window must be seen
+        if match_exposure:  # in 8 bits, saturating: what the brighter photo would have clipped
+            warped = cv2.multiply(warped, (*exposure_gains(img, warped, seen).tolist(), 0.0))
         # |a - b| of 8-bit values is exact in 8 bits; the channel mean and the 0..1 scale in one transform
         diff = cv2.transform(cv2.absdiff(warped, img).astype(np.float32), CHANNEL_MEAN)
         costs.append(np.where(seen, cv2.blur(diff, (window, window)), np.float32(np.inf)))
@@ -89,7 +109,8 @@ def find_support_plane(views: Sequence[View], nbrs: Sequence[Sequence[int]], opt
         fractions = []
         for i in pick:
             others = [views[j] for j in nbrs[i]]
-            cost = plane_cost(views[i], others, normal, offset, opts.consistency_rank)
+            cost = plane_cost(views[i], others, normal, offset, opts.consistency_rank,
+                              match_exposure=opts.match_exposure)
             fractions.append(float((cost[regions[int(i)]] < opts.floor_threshold).mean()))
         return float(np.mean(fractions))
 

@@ -16,7 +16,7 @@ from .views import Plane, SegmentOptions, View, disc, pixel_rays, sphere_box
 
 
 def outside_cost(view: View, others: Sequence[View], rank: int, step_px: float = 1.0, near: float = 0.25,
-                 far: float = 4.0) -> tuple[np.ndarray, tuple[int, int, int, int]] | None:
+                 far: float = 4.0, match_exposure: bool = True) -> tuple[np.ndarray, tuple[int, int, int, int]] | None:
     """How well something *outside* the unit sphere -- a prop in front of it, a wall or prop behind it --
     explains each pixel of the sphere's image: the best ``rank``-th neighbour cost of :func:`plane_cost` over
     fronto-parallel planes at depths from ``near`` to ``far`` times the camera's distance from the centre,
@@ -50,7 +50,7 @@ def outside_cost(view: View, others: Sequence[View], rank: int, step_px: float =
         valid = (z < entry) | (z > exit_)
         if not valid.any():
             continue
-        cost = plane_cost(view, others, axis, float(axis @ o) + z, rank, box=box)
+        cost = plane_cost(view, others, axis, float(axis @ o) + z, rank, box=box, match_exposure=match_exposure)
         np.minimum(best, np.where(valid, cost, np.inf), out=best)
     return best, box
 
@@ -77,7 +77,7 @@ def corner_strength(image: np.ndarray, window: int = 5) -> np.ndarray:
 def occluder_evidence(view: View, others: Sequence[View], opts: SegmentOptions) -> np.ndarray:
     """``(H, W)`` bool: textured, unclipped pixels of the sphere's image that a surface outside the sphere
     explains (:func:`outside_cost`): a prop in front of the object, the room behind it."""
-    found = outside_cost(view, others, opts.sweep_rank, far=opts.sweep_far)
+    found = outside_cost(view, others, opts.sweep_rank, far=opts.sweep_far, match_exposure=opts.match_exposure)
     if found is None:
         return np.zeros(view.shape, bool)
     cost, box = found
@@ -98,7 +98,7 @@ def _matched(view: View, cost: np.ndarray, box: tuple[int, int, int, int], thres
 
 
 def front_cost(view: View, others: Sequence[View], plane: Plane, entry: np.ndarray, box: tuple[int, int, int, int],
-               rank: int, step: float, margin: float) -> tuple[np.ndarray, np.ndarray]:
+               rank: int, step: float, margin: float, match_exposure: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """``(h, w)`` float32 over ``box``: how well something *inside* the unit sphere but in front of the object's
     hull explains each pixel -- the best :func:`plane_cost` over planes parallel to the support plane (a prop's
     top), from ``step`` above it to the top of the sphere, ``step`` apart, counting only where the pixel's ray
@@ -115,7 +115,8 @@ def front_cost(view: View, others: Sequence[View], plane: Plane, entry: np.ndarr
             t = (offset - plane.normal @ o) / facing
         valid = (t > 0) & (t < entry - margin)
         if valid.any():
-            cost = np.where(valid, plane_cost(view, others, plane.normal, offset, rank, box=box), np.inf)
+            cost = np.where(valid, plane_cost(view, others, plane.normal, offset, rank, box=box,
+                                              match_exposure=match_exposure), np.inf)
             better = cost < best
             best[better] = cost[better]
             best_height[better] = height
@@ -153,7 +154,8 @@ def front_evidence(view: View, others: Sequence[View], plane: Plane, depth: np.n
         return np.zeros(view.shape, bool)
     x0, y0, x1, y1 = box
     entry = np.where(_inner(np.isfinite(depth), opts), depth, -np.inf)[y0:y1, x0:x1]
-    cost, heights = front_cost(view, others, plane, entry, box, opts.sweep_rank, opts.front_step, opts.front_margin)
+    cost, heights = front_cost(view, others, plane, entry, box, opts.sweep_rank, opts.front_step, opts.front_margin,
+                               opts.match_exposure)
     tops = _blobs_of_corners(view, _matched(view, cost, box, opts.sweep_threshold, opts), opts.front_min_px, opts)
     ys, xs = np.nonzero(tops[y0:y1, x0:x1])
     if len(ys) == 0:
@@ -214,7 +216,7 @@ def floor_through_hull(view: View, others: Sequence[View], plane: Plane, hull: n
     the floor seen through a hole in the object or under an overhang, which the hull fills because fewer than
     ``carve_share`` of the views see through it. One view suffices: the few that see through are on every side.
     The object's own matches -- a glossy bottom mirrors the floor next to it -- are flat or edges, and specks."""
-    cost = plane_cost(view, others, plane.normal, plane.offset, 1)
+    cost = plane_cost(view, others, plane.normal, plane.offset, 1, match_exposure=opts.match_exposure)
     whole = (0, 0, view.shape[1], view.shape[0])
     found = _matched(view, cost, whole, opts.through_threshold, opts) & _inner(hull, opts)
     return _blobs_of_corners(view, found, opts.through_min_px, opts)

@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import cv2
+import numpy as np
+
 from pipeline.config import PosesConfig
-from pipeline.sfm import required_registered, sequential_pairs
+from pipeline.sfm import equalized_gray, required_registered, sequential_pairs
+from pipeline.signals import import_pycolmap
 
 
 def test_sequential_pairs_wrap_around_the_capture():
@@ -22,3 +26,23 @@ def test_required_registered_uses_count_and_fraction():
     assert required_registered(20, config) == 15
     assert required_registered(3, config) == 3
     assert required_registered(2, config) == 2  # never more than there are photos
+
+
+def test_a_photo_darkened_by_stops_keeps_its_sift_features_once_equalized():
+    """SIFT keeps a feature only above a fixed contrast: a photo that exposure normalization darkened by nearly
+    three stops loses almost all of them; equalized to the common median grey it keeps as many as the original."""
+    pycolmap = import_pycolmap()
+    rng = np.random.default_rng(0)
+    texture = sum(cv2.resize(rng.uniform(0, 1, (s, s)).astype(np.float32), (256, 256), interpolation=cv2.INTER_CUBIC)
+                  for s in (8, 16, 32, 64))
+    photo = (255 * (texture - texture.min()) / (texture.max() - texture.min())).astype(np.uint8)
+    dark = (0.15 * photo).astype(np.uint8)
+    sift = pycolmap.FeatureExtractor.create()
+
+    def features(image: np.ndarray) -> int:
+        return len(sift.extract_from_uint8_array(np.ascontiguousarray(image))[0])  # (keypoints, descriptors)
+
+    equalized = equalized_gray(np.repeat(dark[..., None], 3, -1), PosesConfig().sift_brightness)
+    assert abs(np.median(equalized) - 255 * PosesConfig().sift_brightness) < 2
+    assert features(dark) < 0.1 * features(photo)
+    assert features(equalized) > 0.8 * features(photo)
