@@ -199,6 +199,11 @@ class PosesConfig(StrictModel):
         5.0, gt=0, description="a camera's axis misses the others' convergence point suspiciously when it is more "
         "than this many MADs (as standard deviations) above the median miss, and outside object_window."
     )
+    distance_ratio: float = Field(
+        4.0, gt=1, description="a camera farther from the object than this times the cameras' median distance is "
+        "doubted (a walk-around keeps its distance within ~2x; a weak view graph lets the global mapper put a "
+        "camera far behind the others along its line of sight)."
+    )
     up_max_deg: float = Field(
         10.0, gt=0, le=90, description="warn when the plane under the object (RANSAC on the sparse points) is tilted "
         "by more than this from the cameras' mean up (the masks stage searches the support plane within 10 degrees "

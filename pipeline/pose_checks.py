@@ -15,7 +15,12 @@ figure and a reason a person can read:
    misses the point where the other cameras' axes converge (:func:`pipeline.object_frame.axes_convergence`)
    by much more than the others' (median + a multiple of the MAD), and by more than the central window where
    the object is assumed to lie (``poses.object_window``), or which looks away from it, is doubted.
-3. **Up** (:func:`up_check`): the normalized frame's z is the cameras' mean up
+3. **Cameras far out** (:func:`far_cameras`): a walk-around keeps its distance from the object within a small
+   factor (hand-held: ~2x between the nearest and farthest photo); a camera more than ``poses.distance_ratio``
+   times the cameras' median distance from the point their axes converge on is doubted. A weak view graph
+   leaves the global mapper's translation averaging free to put a camera along its viewing ray far behind the
+   others -- its axis still meets the object, so check 2 cannot see it.
+4. **Up** (:func:`up_check`): the normalized frame's z is the cameras' mean up
    (:func:`pipeline.object_frame.camera_up`). The floor or table under the object, fitted to the sparse points
    by RANSAC (:func:`pipeline.object_frame.support_plane`), should be perpendicular to it; a clearly supported
    plane tilted by more than ``poses.up_max_deg`` is reported (a frame-wide warning, not a photo's).
@@ -53,8 +58,9 @@ class Suspect:
     """One photo whose pose a check doubts."""
 
     name: str
-    check: str  # "path_jump" | "axis_miss" | "looks_away"
-    value: float  # the measured figure: step / median step (path_jump), degrees off the axis (the others)
+    check: str  # "path_jump" | "axis_miss" | "looks_away" | "far_out"
+    value: float  # the measured figure: step / median step (path_jump), degrees off the axis (axis_miss,
+    # looks_away), distance / median distance (far_out)
     limit: float  # the threshold it exceeded, same unit
     reason: str
 
@@ -90,6 +96,7 @@ class PoseChecks:
     median_step: float | None = None  # between consecutive cameras, in the cameras' frame
     median_matches: float | None = None  # verified matches between consecutive photos
     axis_median_deg: float | None = None  # how far the axes miss the others' convergence, median over cameras
+    median_distance: float | None = None  # of the cameras from the axes' convergence, in the cameras' frame
     up: UpCheck | None = None
     notes: list[str] = field(default_factory=list)
 
@@ -263,6 +270,25 @@ def axes_misses(names: Sequence[str], c2w: np.ndarray, K: np.ndarray, sizes: np.
     return suspects, median, None
 
 
+def far_cameras(names: Sequence[str], c2w: np.ndarray, ratio: float) -> tuple[list[Suspect], float | None]:
+    """Cameras more than ``ratio`` times the median distance from the point the axes converge on (see the
+    module doc). Returns (suspects, median distance); none when the axes do not converge (fewer than
+    :data:`MIN_AXES` cameras, nearly parallel axes)."""
+    centers, dirs = c2w[:, :3, 3], c2w[:, :3, 2]
+    if len(names) < MIN_AXES:
+        return [], None
+    point, _, conditioning = axes_convergence(centers, dirs)
+    if conditioning < PARALLEL_AXES:
+        return [], None
+    distance = np.linalg.norm(centers - point, axis=1)
+    median = float(np.median(distance))
+    suspects = [Suspect(names[i], "far_out", float(distance[i] / median), ratio,
+                        f"the camera is {distance[i] / median:.1f} times as far from the object as the median camera "
+                        f"(more than poses.distance_ratio={ratio:g}): SfM placed it along its line of sight, far "
+                        f"behind the others") for i in np.flatnonzero(distance > ratio * median)]
+    return suspects, median
+
+
 # ----------------------------------------------------------------------------------------------------- up
 
 
@@ -304,7 +330,7 @@ def check_poses(names: Sequence[str], c2w: np.ndarray, K: np.ndarray, sizes: np.
         order: ``(N,)`` indices into ``names`` in capture order (:func:`capture_order`), ``order_by`` what set it.
         points: ``(M, 3)`` sparse points, or None (no up check).
         config: the thresholds (``jump_ratio``, ``jump_min_match_share``, ``axis_miss_mads``, ``object_window``,
-            ``up_max_deg``, ``seed``).
+            ``distance_ratio``, ``up_max_deg``, ``seed``).
     """
     checks = PoseChecks(order_by)
     ordered = [names[i] for i in order]
@@ -312,7 +338,8 @@ def check_poses(names: Sequence[str], c2w: np.ndarray, K: np.ndarray, sizes: np.
         ordered, c2w[order, :3, 3], np.asarray(matches, float), config.jump_ratio, config.jump_min_match_share)
     misses, checks.axis_median_deg, note = axes_misses(names, c2w, K, sizes, config.object_window,
                                                        config.axis_miss_mads)
-    checks.suspects = jumps + misses
+    far, checks.median_distance = far_cameras(names, c2w, config.distance_ratio)
+    checks.suspects = jumps + misses + far
     checks.notes += [note] if note else []
     if points is not None:
         center = axes_convergence(c2w[:, :3, 3], c2w[:, :3, 2])[0]

@@ -14,6 +14,7 @@ from pipeline.pose_checks import (
     capture_order,
     check_poses,
     consistent_path,
+    far_cameras,
     path_jumps,
     up_check,
 )
@@ -169,6 +170,24 @@ def test_a_camera_turned_away_is_flagged():
     assert sorted(found) == ["IMG_007", "IMG_020"]
     assert found["IMG_007"].check == "looks_away" and found["IMG_020"].check == "axis_miss"
     assert 30 < found["IMG_020"].value < 40
+
+
+def test_a_camera_pushed_far_along_its_line_of_sight_is_flagged():
+    """What the global mapper did on a real capture with a weak view graph: one camera 45x as far as the others,
+    still aiming at the object (its axis passes every axis check), sharing no matches with its neighbours in
+    capture order (so no path jump is measured). Cameras at 0.6-1.6x the median distance (rings near and far)
+    are not flagged."""
+    c2w = np.concatenate([orbit(18, radius=2.0, seed=3), orbit(18, radius=5.0, height=2.5, seed=4)])
+    n = len(c2w)
+    pushed = c2w.copy()
+    pushed[9, :3, 3] *= 12.0  # from the near ring: along the line from the object, which it aims at
+    names = names_of(n)
+    K, sizes = intrinsics(n)
+    assert far_cameras(names, c2w, CONFIG.distance_ratio)[0] == []
+    suspects, median = far_cameras(names, pushed, CONFIG.distance_ratio)
+    assert [s.name for s in suspects] == ["IMG_009"] and suspects[0].check == "far_out" and suspects[0].value > 5
+    checks = check_poses(names, pushed, K, sizes, np.zeros(n - 1), np.arange(n), "file name", None, CONFIG)
+    assert checks.flagged == ["IMG_009"] and checks.median_distance == pytest.approx(median)
 
 
 def test_axes_of_a_forward_facing_capture_are_not_checked():
