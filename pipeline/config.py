@@ -273,9 +273,11 @@ class MasksConfig(StrictModel):
     )
     floor: bool = Field(True, description="find the support plane and take the floor around the object as background")
     match_exposure: bool = Field(
-        True, description="before comparing two photos for photo-consistency (support plane, depth sweeps), bring "
+        False, description="before comparing two photos for photo-consistency (support plane, depth sweeps), bring "
         "one to the other's exposure and white balance by per-channel gains (the ratio of their medians where they "
-        "overlap): photos of one capture often differ by stops and in tint"
+        "overlap): photos of one capture often differ by stops and in tint. Off by default: on the blowtorch it lets "
+        "a support plane be found, but the carpet explains planes over a third of the object's height about "
+        "equally and the one chosen cuts the object's base (masks IoU median 0.48 instead of 0.63)"
     )
     floor_threshold: float = Field(
         0.03, gt=0, lt=1, description="mean absolute sRGB difference (0..1, 5x5 box) under which the plane explains "

@@ -35,7 +35,7 @@ def exposure_gains(image: np.ndarray, warped: np.ndarray, seen: np.ndarray, min_
 
 def plane_cost(view: View, others: Sequence[View], normal: np.ndarray, offset: float, rank: int,
                window: int = 5, box: tuple[int, int, int, int] | None = None, min_views: int = 2,
-               match_exposure: bool = True) -> np.ndarray:
+               match_exposure: bool = False) -> np.ndarray:
     """``(h, w)`` float32 over ``box`` (default: the whole image): how badly the plane ``normal . x = offset``
     explains each pixel -- the ``rank``-th smallest (1-based) over the neighbours of the mean absolute sRGB
     difference (0..1) over a ``window`` box; each neighbour first brought to the view's exposure and white

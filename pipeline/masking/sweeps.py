@@ -16,7 +16,7 @@ from .views import Plane, SegmentOptions, View, disc, pixel_rays, sphere_box
 
 
 def outside_cost(view: View, others: Sequence[View], rank: int, step_px: float = 1.0, near: float = 0.25,
-                 far: float = 4.0, match_exposure: bool = True) -> tuple[np.ndarray, tuple[int, int, int, int]] | None:
+                 far: float = 4.0, match_exposure: bool = False) -> tuple[np.ndarray, tuple[int, int, int, int]] | None:
     """How well something *outside* the unit sphere -- a prop in front of it, a wall or prop behind it --
     explains each pixel of the sphere's image: the best ``rank``-th neighbour cost of :func:`plane_cost` over
     fronto-parallel planes at depths from ``near`` to ``far`` times the camera's distance from the centre,
@@ -98,7 +98,7 @@ def _matched(view: View, cost: np.ndarray, box: tuple[int, int, int, int], thres
 
 
 def front_cost(view: View, others: Sequence[View], plane: Plane, entry: np.ndarray, box: tuple[int, int, int, int],
-               rank: int, step: float, margin: float, match_exposure: bool = True) -> tuple[np.ndarray, np.ndarray]:
+               rank: int, step: float, margin: float, match_exposure: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """``(h, w)`` float32 over ``box``: how well something *inside* the unit sphere but in front of the object's
     hull explains each pixel -- the best :func:`plane_cost` over planes parallel to the support plane (a prop's
     top), from ``step`` above it to the top of the sphere, ``step`` apart, counting only where the pixel's ray

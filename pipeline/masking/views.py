@@ -58,7 +58,7 @@ class SegmentOptions:
     neighbour_max_deg: float = 60.0
     consistency_rank: int = 3
     floor_threshold: float = 0.03
-    match_exposure: bool = True
+    match_exposure: bool = False
     floor: bool = True
     not_floor_threshold: float = 0.12
     sweep: bool = True

@@ -349,7 +349,7 @@ def test_the_floor_explains_photos_of_different_exposures_once_they_are_matched(
         explained[match] = np.mean([np.mean(c[np.isfinite(c)] < SegmentOptions().floor_threshold) for c in costs])
     assert explained[False] < 0.1 and explained[True] > 0.8
     assert find_support_plane(views, nbrs, SegmentOptions(match_exposure=False)) is None
-    plane = find_support_plane(views, nbrs, SegmentOptions())
+    plane = find_support_plane(views, nbrs, SegmentOptions(match_exposure=True))
     assert plane is not None and abs(plane.offset + 0.9) < 0.03
 
 
