@@ -444,14 +444,15 @@ def _verified_pairs(db_path: Path, min_inliers: int) -> int:
 
 
 def equalized_gray(image: np.ndarray, target: float, max_gain: float = 8.0) -> np.ndarray:
-    """``(H, W)`` uint8 grey of ``image`` (``(H, W)`` or ``(H, W, 3)`` uint8) scaled so that its median is
-    ``target`` (0..1), the gain within ``[1/max_gain, max_gain]``. SIFT keeps a feature only above a fixed
-    contrast: in a photo exposure normalization darkened by stops (or a camera under-exposed) most of the
-    background's features fall under it, and that photo stops matching its brighter neighbours."""
+    """``(H, W)`` uint8 grey of ``image`` (``(H, W)`` or ``(H, W, 3)`` uint8), brightened so that its median is
+    at least ``target`` (0..1), by at most ``max_gain``. SIFT keeps a feature only above a fixed contrast: in a
+    photo exposure normalization darkened by stops (or a camera under-exposed) most of the background's
+    features fall under it, and that photo stops matching its brighter neighbours. Never darkened: a bright
+    photo keeps its features."""
     import cv2
 
     gray = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
-    gain = np.clip(255.0 * target / max(float(np.median(gray)), 1.0), 1.0 / max_gain, max_gain)
+    gain = np.clip(255.0 * target / max(float(np.median(gray)), 1.0), 1.0, max_gain)
     return cv2.convertScaleAbs(gray, alpha=gain)
 
 
