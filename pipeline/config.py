@@ -144,11 +144,9 @@ class PosesConfig(StrictModel):
     )
     sift_brightness: float = Field(
         0.0, ge=0, lt=1, description="SIFT sees each photo in grey, brightened so that its median is at least this "
-        "(0..1, e.g. 0.45): photos exposure normalization made darker by stops keep their features. 0 (the decoded "
-        "photos as they are) by default: on all 67 blowtorch photos 0.45 gave more features (median 8417 vs 6977), "
-        "verified pairs (236 vs 205) and registered photos (51 vs 50; rotation agreement 0.57 vs 0.65 deg), but on "
-        "the synthetic suite it was mixed and on a dark rendered sphere capture slightly worse (rotation error "
-        "0.14 vs 0.12 deg, a lens fit moving pixels over 0.5 px)."
+        "(0..1, e.g. 0.45): photos exposure normalization made darker by stops keep their features. 0: the decoded "
+        "photos as they are (the default: 0.45 helped the blowtorch slightly and was mixed on the synthetic suite; "
+        "bench/results/front_end.jsonl, blowtorch.jsonl)."
     )
     max_num_features: int = Field(8192, ge=64, description="SIFT features kept per image.")
     min_features: int = Field(
@@ -278,9 +276,8 @@ class MasksConfig(StrictModel):
     match_exposure: bool = Field(
         False, description="before comparing two photos for photo-consistency (support plane, depth sweeps), bring "
         "one to the other's exposure and white balance by per-channel gains (the ratio of their medians where they "
-        "overlap): photos of one capture often differ by stops and in tint. Off by default: on the blowtorch it lets "
-        "a support plane be found, but the carpet explains planes over a third of the object's height about "
-        "equally and the one chosen cuts the object's base (masks IoU median 0.48 instead of 0.63)"
+        "overlap): photos of one capture often differ by stops and in tint. Off by default: on the blowtorch's fine "
+        "carpet it finds a support plane at the wrong height (docs/masks.md)"
     )
     floor_threshold: float = Field(
         0.03, gt=0, lt=1, description="mean absolute sRGB difference (0..1, 5x5 box) under which the plane explains "

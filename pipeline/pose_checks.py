@@ -270,16 +270,10 @@ def axes_misses(names: Sequence[str], c2w: np.ndarray, K: np.ndarray, sizes: np.
     return suspects, median, None
 
 
-def far_cameras(names: Sequence[str], c2w: np.ndarray, ratio: float) -> tuple[list[Suspect], float | None]:
-    """Cameras more than ``ratio`` times the median distance from the point the axes converge on (see the
-    module doc). Returns (suspects, median distance); none when the axes do not converge (fewer than
-    :data:`MIN_AXES` cameras, nearly parallel axes)."""
-    centers, dirs = c2w[:, :3, 3], c2w[:, :3, 2]
-    if len(names) < MIN_AXES:
-        return [], None
-    point, _, conditioning = axes_convergence(centers, dirs)
-    if conditioning < PARALLEL_AXES:
-        return [], None
+def far_cameras(names: Sequence[str], centers: np.ndarray, point: np.ndarray,
+                ratio: float) -> tuple[list[Suspect], float]:
+    """Cameras (``centers`` ``(N, 3)``) more than ``ratio`` times the median distance from ``point`` ``(3,)``,
+    where the axes converge (see the module doc). Returns (suspects, median distance)."""
     distance = np.linalg.norm(centers - point, axis=1)
     median = float(np.median(distance))
     suspects = [Suspect(names[i], "far_out", float(distance[i] / median), ratio,
@@ -338,11 +332,13 @@ def check_poses(names: Sequence[str], c2w: np.ndarray, K: np.ndarray, sizes: np.
         ordered, c2w[order, :3, 3], np.asarray(matches, float), config.jump_ratio, config.jump_min_match_share)
     misses, checks.axis_median_deg, note = axes_misses(names, c2w, K, sizes, config.object_window,
                                                        config.axis_miss_mads)
-    far, checks.median_distance = far_cameras(names, c2w, config.distance_ratio)
+    center, _, conditioning = axes_convergence(c2w[:, :3, 3], c2w[:, :3, 2])
+    far = []
+    if len(names) >= MIN_AXES and conditioning >= PARALLEL_AXES:  # else no point to measure distances from
+        far, checks.median_distance = far_cameras(names, c2w[:, :3, 3], center, config.distance_ratio)
     checks.suspects = jumps + misses + far
     checks.notes += [note] if note else []
     if points is not None:
-        center = axes_convergence(c2w[:, :3, 3], c2w[:, :3, 2])[0]
         checks.up = frame_up_check(points, c2w, K, sizes, camera_up(c2w), center, config)
     return checks
 

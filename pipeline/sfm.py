@@ -242,8 +242,6 @@ def run_sfm(
     pycolmap.set_random_seed(config.seed)
 
     t = time.time()
-    sift_dir = image_dir if not config.sift_brightness else \
-        write_sift_images(image_dir, names, work / "sift_images", config.sift_brightness)
     extraction = pycolmap.FeatureExtractionOptions()
     extraction.num_threads = threads
     extraction.max_image_size = config.max_image_size or -1
@@ -251,6 +249,10 @@ def run_sfm(
     # Images are imported before extraction because the extractor's threads number them in the order they
     # finish, and the ids order the matching and mapping: two runs on the same photos could give different poses.
     pycolmap.Database.open(db_path).close()
+    # A retry starts from the first run's database: its features exist, and the extractor skips them.
+    extracted = set(_feature_counts(db_path)) >= set(names)
+    sift_dir = image_dir if not config.sift_brightness or extracted else \
+        write_sift_images(image_dir, names, work / "sift_images", config.sift_brightness)
     for g in groups:
         reader = pycolmap.ImageReaderOptions()
         reader.camera_model = g.model

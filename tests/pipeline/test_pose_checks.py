@@ -9,6 +9,7 @@ from helpers import rotation
 
 from pipeline.cameras import look_at
 from pipeline.config import PosesConfig
+from pipeline.object_frame import axes_convergence
 from pipeline.pose_checks import (
     axes_misses,
     capture_order,
@@ -183,8 +184,10 @@ def test_a_camera_pushed_far_along_its_line_of_sight_is_flagged():
     pushed[9, :3, 3] *= 12.0  # from the near ring: along the line from the object, which it aims at
     names = names_of(n)
     K, sizes = intrinsics(n)
-    assert far_cameras(names, c2w, CONFIG.distance_ratio)[0] == []
-    suspects, median = far_cameras(names, pushed, CONFIG.distance_ratio)
+    assert far_cameras(names, c2w[:, :3, 3], axes_convergence(c2w[:, :3, 3], c2w[:, :3, 2])[0],
+                       CONFIG.distance_ratio)[0] == []
+    point = axes_convergence(pushed[:, :3, 3], pushed[:, :3, 2])[0]
+    suspects, median = far_cameras(names, pushed[:, :3, 3], point, CONFIG.distance_ratio)
     assert [s.name for s in suspects] == ["IMG_009"] and suspects[0].check == "far_out" and suspects[0].value > 5
     checks = check_poses(names, pushed, K, sizes, np.zeros(n - 1), np.arange(n), "file name", None, CONFIG)
     assert checks.flagged == ["IMG_009"] and checks.median_distance == pytest.approx(median)
