@@ -98,6 +98,12 @@ class PosesConfig(StrictModel):
         description="'auto': a capture folder's own cameras.json, transforms.json or poses_bounds.npy (LLFF) "
         "(turntable, phone AR, another SfM run) is used and SfM is skipped; 'ignore': always run SfM.",
     )
+    triangulate_known: bool = Field(
+        True, description="with known cameras that bring no 3D points (cameras.json, transforms.json, LLFF), match "
+        "SIFT features and triangulate sparse points with the cameras held as given: the masks stage seeds the "
+        "object and the floor with them, and training's sparse depth holds the room with them (a COLMAP model's "
+        "own points are used as they are)",
+    )
     camera_model: Literal["auto", "SIMPLE_PINHOLE", "PINHOLE", "SIMPLE_RADIAL", "RADIAL", "OPENCV"] = Field(
         "auto",
         description="COLMAP camera model. 'auto': the calibration's OPENCV model (held fixed) when the capture has "
@@ -323,6 +329,16 @@ class MasksConfig(StrictModel):
     prior_touch_share: float = Field(
         0.25, ge=0, le=1, description="...'many views': more than this share of them"
     )
+    tracks: bool = Field(
+        True, description="seed the masks with the poses stage's sparse points: in each photo that observed a point, "
+        "one on the support plane or outside the object's sphere is certain background and one above the plane "
+        "inside the sphere certain object (pipeline.masking.tracks)"
+    )
+    track_plane_tolerance: float = Field(
+        0.02, gt=0, lt=1, description="...points this close to the plane fitted to them (share of their median "
+        "distance from the object's centre) are on it"
+    )
+    track_seed_px: int = Field(1, ge=0, description="...each point seeds a square of 2n+1 pixels at work_size")
     sphere_margin: float = Field(1.05, ge=1, description="the object's refined bounding sphere is enlarged by this")
     renormalize: bool = Field(
         True, description="write cameras.json in the frame where the refined sphere is the unit sphere (tight "

@@ -242,10 +242,7 @@ def run_sfm(
     pycolmap.set_random_seed(config.seed)
 
     t = time.time()
-    extraction = pycolmap.FeatureExtractionOptions()
-    extraction.num_threads = threads
-    extraction.max_image_size = config.max_image_size or -1
-    extraction.sift.max_num_features = config.max_num_features
+    extraction = extraction_options(config, threads)
     # Images are imported before extraction because the extractor's threads number them in the order they
     # finish, and the ids order the matching and mapping: two runs on the same photos could give different poses.
     pycolmap.Database.open(db_path).close()
@@ -275,28 +272,7 @@ def run_sfm(
     check_features(features, pixel_std, config, folder)
 
     t = time.time()
-    matcher = config.matcher if retry is None else "neighbours"
-    if matcher == "auto":
-        matcher = "exhaustive" if len(names) <= config.exhaustive_max_images else "sequential"
-    matching = pycolmap.FeatureMatchingOptions()
-    matching.num_threads = threads
-    verification = verification_options(config, retry)
-    if matcher == "exhaustive":
-        num_pairs = len(names) * (len(names) - 1) // 2
-        pycolmap.match_exhaustive(db_path, matching_options=matching, verification_options=verification,
-                                  device=pycolmap.Device.auto)
-    else:
-        ordered = sorted(names)
-        pairs = (sequential_pairs(ordered, config.sequential_overlap) if retry is None
-                 else neighbour_pairs(retry.order, retry.overlap))
-        num_pairs = len(pairs)
-        pair_file = work / "pairs.txt"
-        pair_file.write_text("".join(f"{colmap_name(a)} {colmap_name(b)}\n" for a, b in pairs))
-        pairing = pycolmap.ImportedPairingOptions()
-        pairing.match_list_path = str(pair_file)
-        pycolmap.match_image_pairs(db_path, matching_options=matching, pairing_options=pairing,
-                                   verification_options=verification, device=pycolmap.Device.auto)
-    num_verified = _verified_pairs(db_path, verification.min_num_inliers)
+    matcher, num_pairs, num_verified = match_features(db_path, names, work, config, threads, retry)
     seconds["matching"] = time.time() - t
     log.info("matching (%s): %d pairs, %d with a verified geometry [%.1f s]", matcher, num_pairs, num_verified,
              seconds["matching"])
@@ -339,6 +315,82 @@ def run_sfm(
                        num_verified, seconds, mapper)
     _check_registered(result, names, config, folder)
     return result
+
+
+def extraction_options(config: PosesConfig, threads: int) -> pycolmap.FeatureExtractionOptions:
+    """SIFT as the poses section configures it."""
+    extraction = import_pycolmap().FeatureExtractionOptions()
+    extraction.num_threads = threads
+    extraction.max_image_size = config.max_image_size or -1
+    extraction.sift.max_num_features = config.max_num_features
+    return extraction
+
+
+def match_features(db_path: Path, names: Sequence[str], work: Path, config: PosesConfig, threads: int,
+                   retry: RetryMatching | None = None) -> tuple[str, int, int]:
+    """Match the features in ``db_path`` (exhaustively up to ``exhaustive_max_images`` photos, else neighbours in
+    name order; with ``retry``, as it says) and verify the pairs' geometry. Returns the matcher used, the pairs
+    matched and the pairs verified."""
+    pycolmap = import_pycolmap()
+    matcher = config.matcher if retry is None else "neighbours"
+    if matcher == "auto":
+        matcher = "exhaustive" if len(names) <= config.exhaustive_max_images else "sequential"
+    matching = pycolmap.FeatureMatchingOptions()
+    matching.num_threads = threads
+    verification = verification_options(config, retry)
+    if matcher == "exhaustive":
+        num_pairs = len(names) * (len(names) - 1) // 2
+        pycolmap.match_exhaustive(db_path, matching_options=matching, verification_options=verification,
+                                  device=pycolmap.Device.auto)
+    else:
+        ordered = sorted(names)
+        pairs = (sequential_pairs(ordered, config.sequential_overlap) if retry is None
+                 else neighbour_pairs(retry.order, retry.overlap))
+        num_pairs = len(pairs)
+        pair_file = work / "pairs.txt"
+        pair_file.write_text("".join(f"{colmap_name(a)} {colmap_name(b)}\n" for a, b in pairs))
+        pairing = pycolmap.ImportedPairingOptions()
+        pairing.match_list_path = str(pair_file)
+        pycolmap.match_image_pairs(db_path, matching_options=matching, pairing_options=pairing,
+                                   verification_options=verification, device=pycolmap.Device.auto)
+    return matcher, num_pairs, _verified_pairs(db_path, verification.min_num_inliers)
+
+
+def triangulate_known(posed: Posed, image_dir: Path, work: Path, config: PosesConfig) -> pycolmap.Reconstruction:
+    """Sparse points for known cameras: SIFT features and matches as SfM makes them (``image_dir/<name>.png``),
+    triangulated with the cameras and lenses held as given. Known cameras (transforms.json, LLFF) come without
+    points, and the masks stage seeds the object and the floor with them, training's sparse depth holds the room
+    with them. ``work``: an empty folder to be. Returns the model (no points when nothing matched)."""
+    pycolmap = import_pycolmap()
+    threads = num_threads(config)
+    work.mkdir()
+    db_path = work / SFM_DATABASE
+    rec = pycolmap.Reconstruction()
+    db = pycolmap.Database.open(db_path)
+    try:
+        for i, (n, lens, c2w) in enumerate(zip(posed.names, posed.lens, posed.c2w), 1):
+            camera = pycolmap.Camera(model=lens.model, width=lens.width, height=lens.height, params=lens.params,
+                                     camera_id=i)
+            image = pycolmap.Image(name=colmap_name(n), camera_id=i, image_id=i)
+            db.write_camera(camera, use_camera_id=True)
+            db.write_image(image, use_image_id=True)
+            w2c = np.linalg.inv(c2w)
+            rec.add_camera_with_trivial_rig(camera)
+            rec.add_image_with_trivial_frame(image, pycolmap.Rigid3d(pycolmap.Rotation3d(w2c[:3, :3]), w2c[:3, 3]))
+    finally:
+        db.close()
+    t = time.time()
+    # the images are in the database already: the extractor keeps their cameras and only adds features
+    pycolmap.extract_features(db_path, image_dir, image_names=[colmap_name(n) for n in posed.names],
+                              extraction_options=extraction_options(config, threads), device=pycolmap.Device.auto)
+    matcher, num_pairs, num_verified = match_features(db_path, posed.names, work, config, threads)
+    (work / "sparse").mkdir()
+    options = pycolmap.IncrementalPipelineOptions()
+    options.num_threads = threads
+    triangulated = pycolmap.triangulate_points(rec, db_path, image_dir, work / "sparse", options=options)
+    log.info("known cameras: %d sparse points triangulated from %d verified pairs of %d (%s) [%.1f s]",
+             triangulated.num_points3D(), num_verified, num_pairs, matcher, time.time() - t)
+    return triangulated
 
 
 def _mapper_options(config: PosesConfig, groups: Sequence[CameraGroup], threads: int, n: int):
@@ -652,8 +704,11 @@ def posed_from_reconstruction(rec: pycolmap.Reconstruction, names: Sequence[str]
 
 
 def refine_without_object(rec: pycolmap.Reconstruction, posed: Posed, config: PosesConfig) -> Posed:
-    """Delete the 3D points inside the object's bounding sphere and bundle-adjust again: the cameras then rest on
-    the surroundings alone. Returns the refreshed cameras (``stats['object_points_removed']``: how many).
+    """Bundle-adjust again without the 3D points inside the object's bounding sphere: the cameras then rest on the
+    surroundings alone. The points are put back afterwards, unchanged: the masks stage seeds the object with
+    them (:mod:`pipeline.masking.tracks`: in each photo that observed one, that pixel shows the object or a
+    reflection in it), and training's sparse depth leaves out every point seen on the object anyway. Returns the
+    refreshed cameras and the points without them (``stats['object_points_removed']``: how many were left out).
 
     A glossy object's features are mostly reflections that move with the viewpoint: their matches triangulate
     to virtual points inside a convex object (or near a concave one) and pull the cameras a little (on three
@@ -672,7 +727,10 @@ def refine_without_object(rec: pycolmap.Reconstruction, posed: Posed, config: Po
     inside = [i for i, p in rec.points3D.items() if np.linalg.norm(p.xyz - sphere.center) < sphere.radius]
     if not inside or len(inside) > config.object_points_max_share * rec.num_points3D():
         return posed
+    kept = []
     for i in inside:
+        point = rec.points3D[i]
+        kept.append((point.xyz.copy(), pycolmap.Track(point.track.elements), point.color.copy()))
         rec.delete_point3D(i)
     options = pycolmap.BundleAdjustmentOptions()
     options.print_summary = False
@@ -684,7 +742,10 @@ def refine_without_object(rec: pycolmap.Reconstruction, posed: Posed, config: Po
     log.info("%d sparse points inside the object's sphere (reflections, mostly) left out; cameras adjusted again",
              len(inside))
     stats = {**posed.stats, "object_points_removed": len(inside)}
-    return posed_from_reconstruction(rec, posed.names, stats)
+    refined = posed_from_reconstruction(rec, posed.names, stats)  # the object's sphere is found without them too
+    for xyz, track, color in kept:
+        rec.add_point3D(xyz, track, color)
+    return refined
 
 
 def camera_to_world(image: Any) -> np.ndarray:

@@ -53,10 +53,10 @@ def grabcut(image: np.ndarray, seeds: np.ndarray, iterations: int) -> np.ndarray
 
 
 def first_seeds(sphere: np.ndarray, background: np.ndarray, seed_radius: float,
-                above_floor: np.ndarray | None = None) -> np.ndarray:
+                above_floor: np.ndarray | None = None, known_object: np.ndarray | None = None) -> np.ndarray:
     """GrabCut labels before any hull: certain background outside the sphere's image and on the floor,
-    certain object in the central ``seed_radius`` of the sphere's image (the cameras converge on the object),
-    probable object out to 0.7, probable background beyond."""
+    certain object in the central ``seed_radius`` of the sphere's image (the cameras converge on the object) and
+    in ``known_object`` (sparse points on it), probable object out to 0.7, probable background beyond."""
     seeds = np.full(sphere.shape, cv2.GC_BGD, np.uint8)
     seeds[sphere < 1.0] = cv2.GC_PR_BGD
     seeds[sphere < 0.7] = cv2.GC_PR_FGD
@@ -65,17 +65,21 @@ def first_seeds(sphere: np.ndarray, background: np.ndarray, seed_radius: float,
     seeds[background] = cv2.GC_BGD
     # The centre wins over floor evidence: a dark, flat object bottom matches a dark floor anywhere.
     seeds[sphere < seed_radius] = cv2.GC_FGD
+    if known_object is not None:
+        seeds[known_object & ~background] = cv2.GC_FGD
     return seeds
 
 
 def hull_seeds(hull: np.ndarray, keep_out: np.ndarray | None, background: np.ndarray, floor: np.ndarray | None,
-               erode_px: int, band_px: int, clipped: np.ndarray | None = None) -> np.ndarray:
+               erode_px: int, band_px: int, clipped: np.ndarray | None = None,
+               known_object: np.ndarray | None = None) -> np.ndarray:
     """GrabCut labels from the hull's reprojection: certain object in the hull's eroded core (but not in
     ``keep_out``, where the hull is known to be wrong) and on clipped highlights inside the hull (a glossy
     object's highlights are white like many backgrounds), probable object in the rest of the hull, probable
     background in a band around it, certain background beyond and in ``background`` and wherever the floor was
     seen -- except the floor inside the hull, which is only probable background: the bottom rim of a glossy object
-    mirrors the floor next to it at grazing angles and passes the floor test."""
+    mirrors the floor next to it at grazing angles and passes the floor test. ``known_object`` (sparse points on the
+    object) is certain object wherever it is not certain background."""
     h8 = hull.astype(np.uint8)
     seeds = np.full(hull.shape, cv2.GC_BGD, np.uint8)
     seeds[cv2.dilate(h8, disc(band_px)) > 0] = cv2.GC_PR_BGD
@@ -89,5 +93,7 @@ def hull_seeds(hull: np.ndarray, keep_out: np.ndarray | None, background: np.nda
     if floor is not None:
         seeds[floor & hull & ~core] = cv2.GC_PR_BGD
         seeds[floor & ~hull] = cv2.GC_BGD
+    if known_object is not None:
+        seeds[known_object] = cv2.GC_FGD
     seeds[background] = cv2.GC_BGD
     return seeds

@@ -79,15 +79,17 @@ def probe_options(opts: SegmentOptions) -> SegmentOptions:
 
 
 def find_prior_sphere(views: Sequence[View], opts: SegmentOptions,
-                      segment: Callable[[Sequence[View], SegmentOptions], list[np.ndarray]]) -> PriorSphere:
+                      segment: Callable[[Sequence[View], SegmentOptions, np.ndarray, float], list[np.ndarray]]
+                      ) -> PriorSphere:
     """The sphere (frame of ``views``) that contains the object: the unit sphere, grown while the probe's masks
-    reach its outline (see the module doc). ``segment``: views, options -> masks (the driver)."""
+    reach its outline (see the module doc). ``segment``: views in the sphere's frame, options, the sphere's
+    centre and radius in the frame of ``views`` -> masks (the driver)."""
     centre, radius = np.zeros(3), 1.0
     probes: list[dict[str, float]] = []
     cheap = probe_options(opts)
     while True:
         framed = [in_sphere_frame(v, centre, radius) for v in views]
-        masks = segment(framed, cheap)
+        masks = segment(framed, cheap, centre, radius)
         touching = touching_views(masks, framed)
         probes.append({"radius": radius, "centre": centre.tolist(), "touching_views": touching})
         log.info("sphere prior radius %.2f: the probe's masks reach its outline in %d of %d views", radius, touching,

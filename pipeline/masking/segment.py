@@ -15,6 +15,7 @@ from .grabcut import first_seeds, grabcut, hull_seeds
 from .hull import OUTSIDE_VOTES, carve, carve_votes, hull_depth, hull_grid
 from .support_plane import find_support_plane, floor_from_cost, plane_cost
 from .sweeps import floor_through_hull, front_evidence, occluded_region, occluder_evidence
+from .tracks import Tracks, label_points, seed_maps, track_plane
 from .views import Plane, SegmentOptions, View, disc, neighbours, sphere_distance, spread
 
 log = logging.getLogger("orca.masks")
@@ -80,29 +81,47 @@ class Evidence:
     backgrounds: list[np.ndarray]  # certain background: outside the sphere's image, or swept
     occluded: list[np.ndarray | None]  # pixels a surface outside the sphere explains
     masks: list[np.ndarray]  # the first GrabCut masks (the user's where fixed)
+    objects: list[np.ndarray | None]  # pixels where the view observed a sparse point on the object
 
 
 def gather_evidence(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.ndarray] | None = None,
-                    step: Callable[[str], None] = lambda label: None) -> Evidence:
-    """The support plane, floor and swept evidence per view, and the first masks from the sphere prior."""
+                    step: Callable[[str], None] = lambda label: None, tracks: Tracks | None = None) -> Evidence:
+    """The support plane, floor, swept and sparse-point evidence per view, and the first masks from the sphere
+    prior."""
     fixed = fixed or {}
     nbrs = neighbours(views, opts.neighbours, opts.neighbour_max_deg)
-    plane = find_support_plane(views, nbrs, opts) if opts.floor else None
+    use_tracks = tracks is not None and opts.tracks
+    sparse_plane = track_plane(tracks, views, opts.track_plane_tolerance) if use_tracks else None
+    labels = label_points(tracks, sparse_plane) if use_tracks else None
+    # The sparse points' plane, where there is one, is where the floor's features are: photo-consistency on a
+    # finely textured floor (carpet) scores flat over heights, and across photos of differing exposure it
+    # scores nothing.
+    plane = None
+    if opts.floor:
+        plane = sparse_plane if sparse_plane is not None else find_support_plane(views, nbrs, opts)
     step("support plane")
     if plane is not None:
-        log.info("support plane %.3f below the centre, tilt %.1f deg from the cameras' up, explains %.0f %% of the "
-                 "pixels around the object", -plane.offset,
+        log.info("support plane %.3f below the centre, tilt %.1f deg from the cameras' up, %s", -plane.offset,
                  np.degrees(np.arccos(np.clip(plane.normal @ camera_up(np.stack([v.c2w for v in views])), -1, 1))),
-                 100 * plane.consistent_fraction)
+                 f"fitted to the sparse points ({100 * plane.consistent_fraction:.0f} % of those near the object)"
+                 if plane.thickness else
+                 f"explains {100 * plane.consistent_fraction:.0f} % of the pixels around the object")
 
     spheres = [sphere_distance(v) for v in views]
     floors: list[np.ndarray | None] = []
     above: list[np.ndarray | None] = []
     backgrounds = []
     occluded: list[np.ndarray | None] = []
+    objects: list[np.ndarray | None] = []
     near = neighbours(views, opts.sweep_neighbours, opts.neighbour_max_deg) if opts.sweep else None
     for i, v in enumerate(views):
         outside = spheres[i] >= 1.0
+        if labels is not None:
+            seen_object, seen_background = seed_maps(v, tracks, tracks.seen[i], labels, opts.track_seed_px)
+            objects.append(seen_object)
+            outside = outside | seen_background
+        else:
+            objects.append(None)
         if near is not None:
             occluded.append(occluder_evidence(v, [views[j] for j in near[i]], opts))
         else:
@@ -126,23 +145,25 @@ def gather_evidence(views: Sequence[View], opts: SegmentOptions, fixed: dict[int
             masks.append(fixed[i])
         else:
             certain = backgrounds[i] if floors[i] is None else backgrounds[i] | floors[i]
-            masks.append(grabcut(v.image, first_seeds(spheres[i], certain, opts.seed_radius, above[i]),
+            masks.append(grabcut(v.image, first_seeds(spheres[i], certain, opts.seed_radius, above[i], objects[i]),
                                  opts.grabcut_iterations))
         step("segment")
-    return Evidence(plane, spheres, floors, above, backgrounds, occluded, masks)
+    return Evidence(plane, spheres, floors, above, backgrounds, occluded, masks, objects)
 
 
 def segment(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.ndarray] | None = None,
-            on_step: Callable[[str], None] | None = None) -> Segmentation:
+            on_step: Callable[[str], None] | None = None, tracks: Tracks | None = None) -> Segmentation:
     """Object masks for every view (see the module doc).
 
     Args:
         views: the photos at the working size, cameras in the normalized frame.
         fixed: view index -> ``(H, W)`` bool mask the user gave: kept as is, and it votes in every carve.
         on_step: called with a short label after each unit of work (progress bars).
+        tracks: the poses stage's sparse points in the views' frame and which views observed them (seeds: see
+            :mod:`.tracks`), or None.
     """
     step = on_step or (lambda label: None)
-    evidence = gather_evidence(views, opts, fixed, step)
+    evidence = gather_evidence(views, opts, fixed, step, tracks)
     return refine(views, opts, evidence, fixed, step)
 
 
@@ -196,7 +217,7 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
                 new.append(fixed[i])
             else:
                 seeds = hull_seeds(hulls[i], _released(occluded[i], fronts[i], through[i], opts), backgrounds[i],
-                                   floors[i], opts.core_erode_px, opts.band_px, v.clipped)
+                                   floors[i], opts.core_erode_px, opts.band_px, v.clipped, evidence.objects[i])
                 new.append(grabcut(v.image, seeds, opts.grabcut_iterations))
             step("segment")
         agreement = [iou(a, b) for a, b in zip(new, hulls)]

@@ -36,7 +36,8 @@ class Plane:
 
     normal: np.ndarray  # (3,)
     offset: float
-    consistent_fraction: float  # share of the tested pixels the plane explains
+    consistent_fraction: float  # share of the tested pixels (or sparse points, from tracks) the plane explains
+    thickness: float = 0.0  # from sparse points: their distance from it that counts as on it
 
     def height(self, points: np.ndarray) -> np.ndarray:
         """``(..., 3)`` -> ``(...)`` signed height above the plane."""
@@ -87,6 +88,9 @@ class SegmentOptions:
     prior_growth: float = 1.5
     prior_max_growth: float = 3.0
     prior_touch_share: float = 0.25
+    tracks: bool = True
+    track_plane_tolerance: float = 0.02
+    track_seed_px: int = 1
 
 
 def pixel_rays(view: View, box: tuple[int, int, int, int] | None = None) -> np.ndarray:

@@ -88,6 +88,7 @@ from ..masking.hull import carve, carve_votes, hull_grid, reproject
 from ..masking.prior import PriorSphere, find_prior_sphere, in_sphere_frame, touching_views
 from ..masking.scale import full_size_mask, load_view, reduce
 from ..masking.segment import segment
+from ..masking.tracks import tracks_for_views
 from ..masking.views import Plane, SegmentOptions, View
 from ..media import write_point_cloud
 from ..metrics import iou
@@ -95,6 +96,7 @@ from ..object_frame import renormalized, sphere_from_masks
 from ..provenance import FORCE_HELP, check_capture_folder, common_capture
 from ..qa import contact_sheet, mask_overlay, tile, write_jpeg
 from ..results import DecodeArtifacts, image_folder, load_decode, relocated
+from ..sparse_depth import load_sparse_points
 from ..transforms import from_colmap_frame, in_colmap_frame, nerfstudio_transforms
 from ..undistort import recorded_undistortion
 from ..user_masks import find_user_masks, refuse_empty, user_mask
@@ -144,6 +146,10 @@ def run_masks(
     sparse = model_points(poses_dir / SPARSE) if sparse_files else None
     if sparse is not None and not len(sparse[0]):  # a model without points: no PLY, as the poses stage does
         sparse = None
+    tracks = None
+    if sparse is not None and config.tracks:
+        points = load_sparse_points(poses_dir / SPARSE, cameras)
+        tracks = tracks_for_views(points.xyz, points.observers, names)
     user_dir = user_masks_dir
     if user_dir is None and config.user_masks == "auto" and capture_dir is not None:
         user_dir = Path(capture_dir) / USER_MASKS if (Path(capture_dir) / USER_MASKS).is_dir() else None
@@ -178,18 +184,20 @@ def run_masks(
             log.info("every view has a user mask: the automatic method is skipped")
             final, plane, rounds = [fixed[i] for i in range(len(views))], None, []
             # the hull is carved in a sphere: grown while the masks reach past it, or the object is cut
-            prior = find_prior_sphere(views, opts, lambda vs, o: final)
+            prior = find_prior_sphere(views, opts, lambda vs, o, c, r: final)
             views = [in_sphere_frame(v, prior.centre, prior.radius) for v in views]
         else:
             probe = bar.add_task("sphere prior", total=None)
-            prior = find_prior_sphere(views, opts, lambda vs, o: segment(vs, o, fixed=fixed).masks)
+            prior = find_prior_sphere(views, opts, lambda vs, o, c, r: segment(
+                vs, o, fixed=fixed, tracks=tracks.framed(c, r) if tracks is not None else None).masks)
             bar.update(probe, total=1, completed=1)
             views = [in_sphere_frame(v, prior.centre, prior.radius) for v in views]
             # the support plane, floor and first GrabCut per view; per round the carve, GrabCut per view and, from
             # the second, the evidence against the hull per view
             n = len(views)
             task = bar.add_task("segment", total=1 + 2 * n + opts.rounds * (1 + n) + (opts.rounds - 1) * n)
-            seg = segment(views, opts, fixed=fixed, on_step=lambda label: bar.advance(task))
+            seg = segment(views, opts, fixed=fixed, on_step=lambda label: bar.advance(task),
+                          tracks=tracks.framed(prior.centre, prior.radius) if tracks is not None else None)
             final, plane, rounds = seg.masks, seg.plane, seg.rounds
 
         # The hull of the final masks: the views' agreement and the object's bounding sphere.
@@ -213,14 +221,15 @@ def run_masks(
         centre, radius = sphere[0], sphere[1] * config.sphere_margin
     warnings += _check(names, final, agreement, views, radius, prior, config)
     if plane is None and config.floor and len(fixed) < len(views):
-        warnings.append("no support plane was found (the floor or table under the object, by photo-consistency): "
+        warnings.append("no support plane was found (the floor or table under the object, by sparse points or "
+                        "photo-consistency): "
                         "the automatic masks cannot tell the floor beside the object from the object and may keep a "
                         "skirt of it; check contact_sheet.jpg, and give masks for a few views in CAPTURE/masks/")
     # back to the poses frame: segmentation ran where the prior sphere is the unit sphere
     centre, radius = prior.centre + prior.radius * centre, prior.radius * radius
     if plane is not None:
         plane = Plane(plane.normal, float(prior.radius * plane.offset + plane.normal @ prior.centre),
-                      plane.consistent_fraction)
+                      plane.consistent_fraction, prior.radius * plane.thickness)
     for w in warnings:
         log.warning("%s", w)
 
@@ -354,6 +363,7 @@ def _report(records: list[dict[str, Any]], agreement: list[float], sphere: tuple
         "support_plane": None if plane is None else {
             "normal": plane.normal.tolist(), "offset": plane.offset,
             "explained_fraction": plane.consistent_fraction, "frame": "poses",
+            "from": "sparse points" if plane.thickness else "photo-consistency",
         },
         "rounds": rounds,
         "work_scale": scale,

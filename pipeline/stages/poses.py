@@ -100,6 +100,7 @@ from ..sfm import (
     posed_from_sfm_checked,
     quiet_colmap,
     refine_without_object,
+    triangulate_known,
     thumbnail,
     without_dropped,
 )
@@ -164,6 +165,10 @@ def run_poses(
             log.info("known cameras: %s (SfM skipped)", known_file)
             posed, reconstruction = known_cameras(known_file, names, width, height)
             source = str(known_file)
+            if reconstruction is None and config.triangulate_known:
+                reconstruction = triangulate_known(posed, decoded.folder / SRGB, tmp / "work", config)
+                posed.stats["points3D"] = reconstruction.num_points3D()
+                shutil.rmtree(tmp / "work")
         else:
             duplicates = check_not_identical({n: thumbnail(decoded.srgb(n)) for n in names}, photo_dir)
             if duplicates:

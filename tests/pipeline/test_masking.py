@@ -362,7 +362,7 @@ def clipped_ball_masks(centre: np.ndarray, radius: float, views: list[View]):
     """A stand-in for the segmentation: the ball's exact silhouettes, cut by the (framed) unit sphere's image --
     what the sphere prior does to an object larger than the sphere."""
     silhouettes = {v.name: ball_silhouette(v, centre, radius) for v in views}
-    return lambda framed, opts: [silhouettes[v.name] & (sphere_distance(v) < 1.0) for v in framed]
+    return lambda framed, opts, centre, radius: [silhouettes[v.name] & (sphere_distance(v) < 1.0) for v in framed]
 
 
 def test_the_sphere_prior_grows_until_it_contains_an_object_larger_than_the_poses_sphere():

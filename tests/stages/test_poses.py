@@ -104,10 +104,37 @@ def test_known_transforms_json_skips_sfm_and_round_trips(tiny_capture, tiny_deco
     loaded = load_poses(tmp_path / "poses")
     report = loaded.report
     assert report["registered"] == report["total"] == len(truth) and not report["undistorted"]
-    assert (tmp_path / "poses" / "poses.png").is_file() and loaded.reconstruction() is None
+    assert (tmp_path / "poses" / "poses.png").is_file()
+    # the known cameras as a COLMAP model (sparse points triangulated with them: none on 4 tiny views)
+    assert loaded.reconstruction().num_reg_images() == len(truth)
     # the normalized frame's transforms.json holds the normalized cameras
     again = load_transforms(tmp_path / "poses" / "transforms.json").cameras
     np.testing.assert_allclose(again.c2w(), out.c2w(), atol=1e-9)
+
+
+def test_known_cameras_get_sparse_points_triangulated_with_them(sfm_sphere_capture, sfm_sphere_decode, tmp_path):
+    """The sphere capture's true cameras as a transforms.json: SIFT matches triangulated with the cameras held as
+    given -- hundreds of points, reprojecting within a pixel, the cameras unchanged; the masks stage and training
+    read them like SfM's."""
+    from pipeline.results import load_poses
+    from pipeline.sparse_depth import load_sparse_points
+
+    truth = load_cameras(sfm_sphere_capture / "ground_truth" / "cameras.json")
+    capture = tmp_path / "capture"
+    capture.mkdir()
+    save_transforms(capture / "transforms.json", truth)
+    result = run(capture, sfm_sphere_decode, tmp_path / "poses")
+    assert result.source.endswith("transforms.json") and result.registered == len(truth)
+    rec = load_poses(tmp_path / "poses").reconstruction()
+    assert rec.num_reg_images() == len(truth)
+    assert rec.num_points3D() > 300 and rec.compute_mean_reprojection_error() < 1.0, rec.summary()
+    cams = load_cameras(tmp_path / "poses" / "cameras.json")
+    points = load_sparse_points(tmp_path / "poses" / "sparse", cams)
+    assert len(points.xyz) > 100 and all(len(o) >= 3 for o in points.observers)
+    assert not (tmp_path / "poses" / "work").exists()
+    # with it off, the known cameras alone
+    off = run(capture, sfm_sphere_decode, tmp_path / "off", PosesConfig(num_threads=2, triangulate_known=False))
+    assert off.registered == len(truth) and load_poses(tmp_path / "off").reconstruction() is None
 
 
 def test_known_llff_poses_bounds_skips_sfm(tiny_capture, tiny_decode, tmp_path):
@@ -284,6 +311,12 @@ def test_sphere_capture_registers_every_view_accurately(sfm_sphere_capture, sfm_
                 p = w2c[:3, :3] @ points.xyz[row[p2d.point3D_id]] + w2c[:3, 3]
                 errors.append(np.linalg.norm(cam.K[:2, :2] @ (p[:2] / p[2]) + cam.K[:2, 2] - np.asarray(p2d.xy)))
     assert len(errors) > 1000 and np.median(errors) < 0.5, (len(errors), np.median(errors))
+    # the points inside the object's sphere, left out of the last bundle adjustment, are back in the model (the
+    # masks stage seeds the object with them)
+    everything = load_sparse_points(out / "sparse", cams, min_track=2)
+    inside = int((np.linalg.norm(everything.xyz, axis=1) < 1.0).sum())
+    print("object points left out of the adjustment", report["object_points_removed"], "in the model", inside)
+    assert report["object_points_removed"] > 0 and inside >= report["object_points_removed"]
 
 
 @pytest.mark.slow

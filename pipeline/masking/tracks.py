@@ -1,0 +1,114 @@
+"""Structure from motion's points as seeds: what each photo saw, and where in 3D it lies.
+
+The poses stage triangulated thousands of features, and each point's track names the photos whose features made
+it -- so in each of those photos the point was *visible* at its projection (no occlusion test is needed). Where a
+point lies tells what that pixel shows:
+
+- **on the support plane** (within ``track_plane_tolerance`` of the mean distance of the points from the
+  object's centre) or **outside the sphere** the object lies in: the floor or the room, certain background;
+- **above the plane, inside the sphere**: the object (a feature on its texture, a knob, a dark handle) or a
+  reflection in it -- a convex mirror's virtual image lies behind its surface, inside the object -- certain object;
+- below the plane: a reflection of the floor in the floor's own mirror image (a glossy base): no evidence.
+
+The plane is fitted to the points by RANSAC (:func:`pipeline.object_frame.support_plane`, the poses stage's),
+normal within 30 degrees of the cameras' up. Without a plane nothing inside the sphere is labelled: the floor
+and the object cannot be told apart by position alone.
+
+Why: colour alone loses a dark handle on a dark carpet shadow in every view from above, and the hull then
+carves it away for good; a handful of features on it, seen from many sides, keep it. Floor features beside the
+object trim the skirt of carpet a loose hull leaves.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..object_frame import camera_up, pixels_of, support_plane
+from .views import Plane, View
+
+FLOOR, OBJECT, UNKNOWN, OUTSIDE = 0, 1, 2, 3
+PLANE_SEARCH_RADIUS = 3.0  # the plane is fitted to the points within this many sphere radii of the centre
+MIN_TRACK_POINTS = 20  # fewer points than this: no evidence
+
+
+@dataclass(frozen=True)
+class Tracks:
+    """Triangulated points and which views observed them."""
+
+    xyz: np.ndarray  # (M, 3) in the views' frame
+    seen: list[np.ndarray]  # per view: (K,) int indices into xyz of the points that view observed
+
+    def framed(self, centre: np.ndarray, radius: float) -> Tracks:
+        """The points in the frame where the sphere ``(centre, radius)`` is the unit sphere (as
+        :func:`pipeline.masking.prior.in_sphere_frame` moves the views)."""
+        return Tracks((self.xyz - centre) / radius, self.seen)
+
+
+def tracks_for_views(xyz: np.ndarray, observers: Sequence[Sequence[str]], names: Sequence[str]) -> Tracks:
+    """:class:`Tracks` from points ``(M, 3)`` and the names of the photos that observed each, for the views
+    ``names`` (observers that are not among them are ignored)."""
+    index = {n: i for i, n in enumerate(names)}
+    seen: list[list[int]] = [[] for _ in names]
+    for p, obs in enumerate(observers):
+        for n in obs:
+            if n in index:
+                seen[index[n]].append(p)
+    return Tracks(np.asarray(xyz, np.float64).reshape(-1, 3), [np.asarray(s, np.int64) for s in seen])
+
+
+def track_plane(tracks: Tracks, views: Sequence[View], tolerance: float, seed: int = 0) -> Plane | None:
+    """The support plane fitted to the points by RANSAC, in the frame where the object lies in the unit sphere, or
+    None: too few points near the object, no dominant plane along the cameras' up, or one that does not cut the
+    sphere (the object stands on what it touches; a floor under a table or under a floating object is not that).
+    ``tolerance``: the plane's thickness as a share of the median distance of the fitted points from the origin;
+    ``consistent_fraction``: the share of those points on it."""
+    dist = np.linalg.norm(tracks.xyz, axis=1)
+    near = tracks.xyz[dist < PLANE_SEARCH_RADIUS]
+    if len(near) < MIN_TRACK_POINTS:
+        return None
+    up = camera_up(np.stack([v.c2w for v in views]))
+    thickness = tolerance * float(np.median(np.linalg.norm(near, axis=1)))
+    on = support_plane(near, up, thickness, np.random.default_rng(seed))
+    if not on.any():
+        return None
+    flat = near[on]
+    normal = np.linalg.svd(flat - flat.mean(0))[2][2]
+    normal = normal if normal @ up > 0 else -normal
+    offset = float(normal @ flat.mean(0))
+    if not -1.0 < offset < 0.0:
+        return None
+    return Plane(normal, offset, float(on.mean()), thickness)
+
+
+def label_points(tracks: Tracks, plane: Plane | None) -> np.ndarray:
+    """``(M,)`` int8 label per point, in the frame where the object lies in the unit sphere: ``FLOOR``,
+    ``OBJECT``, ``UNKNOWN`` or ``OUTSIDE`` (see the module doc). ``plane``: :func:`track_plane`'s."""
+    dist = np.linalg.norm(tracks.xyz, axis=1)
+    labels = np.full(len(dist), UNKNOWN, np.int8)
+    labels[dist >= 1.0] = OUTSIDE
+    if plane is None:
+        return labels
+    height = plane.height(tracks.xyz)
+    labels[np.abs(height) < plane.thickness] = FLOOR
+    labels[(height >= plane.thickness) & (dist < 1.0)] = OBJECT
+    return labels
+
+
+def seed_maps(view: View, tracks: Tracks, seen: np.ndarray, labels: np.ndarray,
+              radius_px: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(H, W)`` bool maps of one view: its observed object points and its observed background points (floor and
+    outside the sphere), each a square of ``2 radius_px + 1`` pixels at the point's projection."""
+    h, w = view.shape
+    obj, bg = np.zeros((h, w), bool), np.zeros((h, w), bool)
+    if len(seen) == 0:
+        return obj, bg
+    inside, x, y = pixels_of(tracks.xyz[seen], view.c2w, view.K, (h, w))
+    kind = labels[seen][inside]
+    for out, chosen in ((obj, kind == OBJECT), (bg, (kind == FLOOR) | (kind == OUTSIDE))):
+        for dy in range(-radius_px, radius_px + 1):
+            for dx in range(-radius_px, radius_px + 1):
+                out[np.clip(y[chosen] + dy, 0, h - 1), np.clip(x[chosen] + dx, 0, w - 1)] = True
+    return obj, bg
