@@ -339,6 +339,10 @@ class MasksConfig(StrictModel):
         "distance from the object's centre) are on it"
     )
     track_seed_px: int = Field(1, ge=0, description="...each point seeds a square of 2n+1 pixels at work_size")
+    track_far: float = Field(
+        3.0, gt=1, description="...points farther than this many radii of the object's sphere are the room (closer "
+        "ones outside it may be the object reaching past a sphere still to grow: no evidence)"
+    )
     sphere_margin: float = Field(1.05, ge=1, description="the object's refined bounding sphere is enlarged by this")
     renormalize: bool = Field(
         True, description="write cameras.json in the frame where the refined sphere is the unit sphere (tight "

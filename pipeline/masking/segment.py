@@ -91,21 +91,15 @@ def gather_evidence(views: Sequence[View], opts: SegmentOptions, fixed: dict[int
     fixed = fixed or {}
     nbrs = neighbours(views, opts.neighbours, opts.neighbour_max_deg)
     use_tracks = tracks is not None and opts.tracks
-    sparse_plane = track_plane(tracks, views, opts.track_plane_tolerance) if use_tracks else None
-    labels = label_points(tracks, sparse_plane) if use_tracks else None
-    # The sparse points' plane, where there is one, is where the floor's features are: photo-consistency on a
-    # finely textured floor (carpet) scores flat over heights, and across photos of differing exposure it
-    # scores nothing.
-    plane = None
-    if opts.floor:
-        plane = sparse_plane if sparse_plane is not None else find_support_plane(views, nbrs, opts)
+    labels = label_points(tracks, track_plane(tracks, views, opts.track_plane_tolerance), opts.track_far) \
+        if use_tracks else None
+    plane = find_support_plane(views, nbrs, opts) if opts.floor else None
     step("support plane")
     if plane is not None:
-        log.info("support plane %.3f below the centre, tilt %.1f deg from the cameras' up, %s", -plane.offset,
+        log.info("support plane %.3f below the centre, tilt %.1f deg from the cameras' up, explains %.0f %% of the "
+                 "pixels around the object", -plane.offset,
                  np.degrees(np.arccos(np.clip(plane.normal @ camera_up(np.stack([v.c2w for v in views])), -1, 1))),
-                 f"fitted to the sparse points ({100 * plane.consistent_fraction:.0f} % of those near the object)"
-                 if plane.thickness else
-                 f"explains {100 * plane.consistent_fraction:.0f} % of the pixels around the object")
+                 100 * plane.consistent_fraction)
 
     spheres = [sphere_distance(v) for v in views]
     floors: list[np.ndarray | None] = []

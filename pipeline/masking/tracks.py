@@ -4,19 +4,23 @@ The poses stage triangulated thousands of features, and each point's track names
 it -- so in each of those photos the point was *visible* at its projection (no occlusion test is needed). Where a
 point lies tells what that pixel shows:
 
-- **on the support plane** (within ``track_plane_tolerance`` of the mean distance of the points from the
-  object's centre) or **outside the sphere** the object lies in: the floor or the room, certain background;
-- **above the plane, inside the sphere**: the object (a feature on its texture, a knob, a dark handle) or a
-  reflection in it -- a convex mirror's virtual image lies behind its surface, inside the object -- certain object;
-- below the plane: a reflection of the floor in the floor's own mirror image (a glossy base): no evidence.
+- **on the floor** (within the plane's thickness, ``track_plane_tolerance`` of the points' median distance from
+  the object's centre) or **far outside the sphere** the object lies in (``track_far`` radii: the sphere may
+  still grow to hold an object reaching past it): the floor or the room, certain background;
+- **clearly above the floor, inside the sphere** (more than twice the plane's thickness: a carpet's pile and
+  waves lie within it): the object (a feature on its texture, a knob, a dark handle) or a reflection in it -- a
+  convex mirror's virtual image lies behind its surface, inside the object -- certain object;
+- anything else (just above the floor, below it, between the sphere and ``track_far``): no evidence.
 
 The plane is fitted to the points by RANSAC (:func:`pipeline.object_frame.support_plane`, the poses stage's),
-normal within 30 degrees of the cameras' up. Without a plane nothing inside the sphere is labelled: the floor
-and the object cannot be told apart by position alone.
+normal within 30 degrees of the cameras' up, and must cut the sphere. Without one nothing inside the sphere is
+labelled: the floor and the object cannot be told apart by position alone.
 
 Why: colour alone loses a dark handle on a dark carpet shadow in every view from above, and the hull then
-carves it away for good; a handful of features on it, seen from many sides, keep it. Floor features beside the
-object trim the skirt of carpet a loose hull leaves.
+carves it away for good; a handful of features on it, seen from many sides, keep it. On the real blowtorch
+(50 views with SfM's cameras) the masks' IoU against the photographers' rose from 0.63 to 0.73 with them. The
+plane is used for the labels only: as the support plane of the floor cue (in place of photo-consistency's,
+which finds none on the blowtorch's carpet) it cost 0.04 IoU there.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ from .views import Plane, View
 FLOOR, OBJECT, UNKNOWN, OUTSIDE = 0, 1, 2, 3
 PLANE_SEARCH_RADIUS = 3.0  # the plane is fitted to the points within this many sphere radii of the centre
 MIN_TRACK_POINTS = 20  # fewer points than this: no evidence
+OBJECT_CLEARANCE = 2.0  # an object point lies this many plane thicknesses above it (carpet pile lies within)
 
 
 @dataclass(frozen=True)
@@ -83,17 +88,18 @@ def track_plane(tracks: Tracks, views: Sequence[View], tolerance: float, seed: i
     return Plane(normal, offset, float(on.mean()), thickness)
 
 
-def label_points(tracks: Tracks, plane: Plane | None) -> np.ndarray:
+def label_points(tracks: Tracks, plane: Plane | None, far: float) -> np.ndarray:
     """``(M,)`` int8 label per point, in the frame where the object lies in the unit sphere: ``FLOOR``,
-    ``OBJECT``, ``UNKNOWN`` or ``OUTSIDE`` (see the module doc). ``plane``: :func:`track_plane`'s."""
+    ``OBJECT``, ``UNKNOWN`` or ``OUTSIDE`` (see the module doc). ``plane``: :func:`track_plane`'s; ``far``: the
+    distance (sphere radii) beyond which a point is the room."""
     dist = np.linalg.norm(tracks.xyz, axis=1)
     labels = np.full(len(dist), UNKNOWN, np.int8)
-    labels[dist >= 1.0] = OUTSIDE
+    labels[dist >= far] = OUTSIDE
     if plane is None:
         return labels
     height = plane.height(tracks.xyz)
     labels[np.abs(height) < plane.thickness] = FLOOR
-    labels[(height >= plane.thickness) & (dist < 1.0)] = OBJECT
+    labels[(height > OBJECT_CLEARANCE * plane.thickness) & (dist < 1.0)] = OBJECT
     return labels
 
 

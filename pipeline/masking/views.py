@@ -36,8 +36,8 @@ class Plane:
 
     normal: np.ndarray  # (3,)
     offset: float
-    consistent_fraction: float  # share of the tested pixels (or sparse points, from tracks) the plane explains
-    thickness: float = 0.0  # from sparse points: their distance from it that counts as on it
+    consistent_fraction: float  # share of the tested pixels (or sparse points, for tracks) the plane explains
+    thickness: float = 0.0  # for sparse points: their distance from it that counts as on it
 
     def height(self, points: np.ndarray) -> np.ndarray:
         """``(..., 3)`` -> ``(...)`` signed height above the plane."""
@@ -91,6 +91,7 @@ class SegmentOptions:
     tracks: bool = True
     track_plane_tolerance: float = 0.02
     track_seed_px: int = 1
+    track_far: float = 3.0
 
 
 def pixel_rays(view: View, box: tuple[int, int, int, int] | None = None) -> np.ndarray:

@@ -221,15 +221,14 @@ def run_masks(
         centre, radius = sphere[0], sphere[1] * config.sphere_margin
     warnings += _check(names, final, agreement, views, radius, prior, config)
     if plane is None and config.floor and len(fixed) < len(views):
-        warnings.append("no support plane was found (the floor or table under the object, by sparse points or "
-                        "photo-consistency): "
+        warnings.append("no support plane was found (the floor or table under the object, by photo-consistency): "
                         "the automatic masks cannot tell the floor beside the object from the object and may keep a "
                         "skirt of it; check contact_sheet.jpg, and give masks for a few views in CAPTURE/masks/")
     # back to the poses frame: segmentation ran where the prior sphere is the unit sphere
     centre, radius = prior.centre + prior.radius * centre, prior.radius * radius
     if plane is not None:
         plane = Plane(plane.normal, float(prior.radius * plane.offset + plane.normal @ prior.centre),
-                      plane.consistent_fraction, prior.radius * plane.thickness)
+                      plane.consistent_fraction)
     for w in warnings:
         log.warning("%s", w)
 
@@ -363,7 +362,6 @@ def _report(records: list[dict[str, Any]], agreement: list[float], sphere: tuple
         "support_plane": None if plane is None else {
             "normal": plane.normal.tolist(), "offset": plane.offset,
             "explained_fraction": plane.consistent_fraction, "frame": "poses",
-            "from": "sparse points" if plane.thickness else "photo-consistency",
         },
         "rounds": rounds,
         "work_scale": scale,

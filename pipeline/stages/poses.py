@@ -100,8 +100,8 @@ from ..sfm import (
     posed_from_sfm_checked,
     quiet_colmap,
     refine_without_object,
-    triangulate_known,
     thumbnail,
+    triangulate_known,
     without_dropped,
 )
 from ..transforms import nerfstudio_transforms

@@ -33,13 +33,13 @@ def ring(n: int = 12, size: tuple[int, int] = (200, 150)) -> list[View]:
 
 
 def scene(rng: np.random.Generator) -> dict[str, np.ndarray]:
-    """A floor around the object (out to 2.5), points on a ball standing on it, the room far away, and mirror
+    """A floor around the object (out to 2.5), points on a ball just above it, the room far away, and mirror
     images of the floor below it."""
     r = 2.5 * np.sqrt(rng.uniform(0, 1, 600))
     a = rng.uniform(0, 2 * np.pi, 600)
     floor = np.stack([r * np.cos(a), r * np.sin(a), np.full(600, FLOOR_Z)], -1)
     d = rng.normal(size=(80, 3))
-    ball = np.array([0.0, 0.0, -0.15]) + 0.4 * d / np.linalg.norm(d, axis=1, keepdims=True)
+    ball = np.array([0.0, 0.0, -0.1]) + 0.4 * d / np.linalg.norm(d, axis=1, keepdims=True)
     a = rng.uniform(0, 2 * np.pi, 100)
     room = np.stack([6 * np.cos(a), 6 * np.sin(a), rng.uniform(-0.5, 2.0, 100)], -1)
     below = np.stack([rng.uniform(-0.3, 0.3, 20), rng.uniform(-0.3, 0.3, 20), np.full(20, FLOOR_Z - 0.3)], -1)
@@ -61,7 +61,7 @@ def test_points_are_labelled_by_where_they_lie_and_seed_where_they_were_seen():
     xyz = np.concatenate(list(parts.values()))
     kinds = np.concatenate([np.full(len(p), k) for k, p in zip((FLOOR, OBJECT, OUTSIDE, UNKNOWN), parts.values())])
     tracks = tracks_for_views(xyz, observers(xyz, views), [v.name for v in views])
-    labels = label_points(tracks, track_plane(tracks, views, tolerance=0.02))
+    labels = label_points(tracks, track_plane(tracks, views, tolerance=0.02), far=3.0)
     # floor points inside the sphere and beyond it are both background; the room is outside
     expected = np.where((kinds == FLOOR), FLOOR, kinds)
     np.testing.assert_array_equal(labels, expected)
@@ -79,6 +79,19 @@ def test_points_are_labelled_by_where_they_lie_and_seed_where_they_were_seen():
     assert below.any() and not (obj[y[below], x[below]] | bg[y[below], x[below]]).all()
 
 
+def test_points_just_above_the_floor_or_just_outside_the_sphere_are_no_evidence():
+    """Carpet pile (within twice the plane's thickness above it) may be either; so may a point between the sphere
+    and ``far`` (an object reaching past a sphere that is still to grow)."""
+    views = ring()
+    parts = scene(np.random.default_rng(4))
+    tracks = tracks_for_views(parts["floor"], observers(parts["floor"], views), [v.name for v in views])
+    plane = track_plane(tracks, views, tolerance=0.02)
+    probes = np.array([[0.1, 0.0, FLOOR_Z + 1.5 * plane.thickness], [0.1, 0.0, FLOOR_Z + 3 * plane.thickness],
+                       [0.0, 1.5, 0.3], [0.0, 3.5, 0.3]])
+    labels = label_points(tracks_for_views(probes, [[]] * 4, []), plane, far=3.0)
+    np.testing.assert_array_equal(labels, [UNKNOWN, OBJECT, UNKNOWN, OUTSIDE])
+
+
 def test_a_view_seeds_only_the_points_it_observed():
     views = ring()
     parts = scene(np.random.default_rng(1))
@@ -86,7 +99,7 @@ def test_a_view_seeds_only_the_points_it_observed():
     seen_by = observers(xyz, views)
     seen_by[len(parts["floor"]):] = [[n for n in s if n != "v0"] for s in seen_by[len(parts["floor"]):]]
     tracks = tracks_for_views(xyz, seen_by, [v.name for v in views])
-    labels = label_points(tracks, track_plane(tracks, views, tolerance=0.02))
+    labels = label_points(tracks, track_plane(tracks, views, tolerance=0.02), far=3.0)
     obj, bg = seed_maps(views[0], tracks, tracks.seen[0], labels, radius_px=1)
     assert not obj.any() and bg.any()
 
@@ -97,7 +110,7 @@ def test_without_a_plane_nothing_inside_the_sphere_is_labelled():
     parts = scene(np.random.default_rng(2))
     xyz = np.concatenate([parts["ball"], parts["room"]])
     tracks = tracks_for_views(xyz, observers(xyz, views), [v.name for v in views])
-    labels = label_points(tracks, track_plane(tracks, views, tolerance=0.02))
+    labels = label_points(tracks, track_plane(tracks, views, tolerance=0.02), far=3.0)
     assert not (labels == OBJECT).any() and (labels[len(parts["ball"]):] == OUTSIDE).all()
 
 
@@ -118,4 +131,4 @@ def test_the_plane_is_the_floor_under_the_object_and_none_when_the_floor_is_out_
     low = xyz - np.array([0.0, 0.0, 0.8]) * (np.arange(len(xyz)) < len(parts["floor"]))[:, None]
     tracks = tracks_for_views(low, observers(low, views), [v.name for v in views])
     assert track_plane(tracks, views, tolerance=0.02) is None
-    assert not (label_points(tracks, None) == OBJECT).any()
+    assert not (label_points(tracks, None, far=3.0) == OBJECT).any()
