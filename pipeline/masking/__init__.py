@@ -16,6 +16,10 @@ Three cues, each cheap and each weak alone, made to agree:
    projected sphere, seeded by what is known: cues 1 and 2 as certain background, the current visual hull's
    reprojection as probable object, its eroded core as object.
 
+A fourth, where the poses stage triangulated points (:mod:`.tracks`): in each photo that observed a point, one on
+the floor or far outside the sphere is certain background and one clearly above the floor inside the sphere
+certain object.
+
 They are made to agree by **visual-hull carving**: a voxel of the unit sphere is cut when ``carve_share`` of
 the views (at least ``carve_votes``) see it off the object: a few, not one, so that a view that misses a piece
 does not cut it out of every other view; not many, because next to a thin part only the few views looking
@@ -55,7 +59,8 @@ them, and inside the hull colour alone does not separate a glossy object from wh
 below the voxel size.
 
 Modules: :mod:`.views` (views, the sphere prior, the knobs), :mod:`.support_plane`, :mod:`.hull`, :mod:`.grabcut`,
-:mod:`.sweeps` (what is not the object), :mod:`.segment` (the driver), :mod:`.scale` (working size <-> full size).
+:mod:`.sweeps` (what is not the object), :mod:`.tracks` (the sparse points), :mod:`.segment` (the driver),
+:mod:`.scale` (working size <-> full size).
 
 Arrays: images ``(H, W, 3)`` uint8 sRGB at the working size; masks ``(H, W)`` bool; cameras OpenCV
 camera-to-world ``(4, 4)`` and pinhole ``K`` ``(3, 3)`` at the working size (pixel (0, 0) is the image

@@ -15,7 +15,7 @@ from .grabcut import first_seeds, grabcut, hull_seeds
 from .hull import OUTSIDE_VOTES, carve, carve_votes, hull_depth, hull_grid
 from .support_plane import find_support_plane, floor_from_cost, plane_cost
 from .sweeps import floor_through_hull, front_evidence, occluded_region, occluder_evidence
-from .tracks import Tracks, label_points, seed_maps, track_plane
+from .tracks import LABELS, Tracks, label_points, seed_maps, track_plane
 from .views import Plane, SegmentOptions, View, disc, neighbours, sphere_distance, spread
 
 log = logging.getLogger("orca.masks")
@@ -33,6 +33,7 @@ class Segmentation:
     plane: Plane | None
     volume: np.ndarray  # (R, R, R) float32 background votes over [-1, 1]^3 (see carve)
     rounds: list[dict[str, float]] = field(default_factory=list)  # per round: agreement of GrabCut and hull
+    track_labels: dict[str, int] | None = None  # the sparse points per label (None: no points)
 
 
 def _released(occluded: np.ndarray | None, front: np.ndarray | None, through: np.ndarray | None,
@@ -82,6 +83,7 @@ class Evidence:
     occluded: list[np.ndarray | None]  # pixels a surface outside the sphere explains
     masks: list[np.ndarray]  # the first GrabCut masks (the user's where fixed)
     objects: list[np.ndarray | None]  # pixels where the view observed a sparse point on the object
+    track_labels: dict[str, int] | None = None  # the sparse points per label (None: no points)
 
 
 def gather_evidence(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.ndarray] | None = None,
@@ -142,7 +144,8 @@ def gather_evidence(views: Sequence[View], opts: SegmentOptions, fixed: dict[int
             masks.append(grabcut(v.image, first_seeds(spheres[i], certain, opts.seed_radius, above[i], objects[i]),
                                  opts.grabcut_iterations))
         step("segment")
-    return Evidence(plane, spheres, floors, above, backgrounds, occluded, masks, objects)
+    counts = None if labels is None else {name: int((labels == value).sum()) for name, value in LABELS.items()}
+    return Evidence(plane, spheres, floors, above, backgrounds, occluded, masks, objects, counts)
 
 
 def segment(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.ndarray] | None = None,
@@ -234,4 +237,4 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
             else:
                 m = h & ~backgrounds[i] & ~occluded_region(h, m, occluded[i])
         final.append(m)
-    return Segmentation(final, masks, hulls, floors, occluded, plane, volume, rounds)
+    return Segmentation(final, masks, hulls, floors, occluded, plane, volume, rounds, evidence.track_labels)

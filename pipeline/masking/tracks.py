@@ -13,7 +13,7 @@ point lies tells what that pixel shows:
 - anything else (just above the floor, below it, between the sphere and ``track_far``): no evidence.
 
 The plane is fitted to the points by RANSAC (:func:`pipeline.object_frame.support_plane`, the poses stage's),
-normal within 30 degrees of the cameras' up, and must cut the sphere. Without one nothing inside the sphere is
+normal within 30 degrees of the cameras' up, and must cut the sphere (or nearly). Without one nothing inside the sphere is
 labelled: the floor and the object cannot be told apart by position alone.
 
 Why: colour alone loses a dark handle on a dark carpet shadow in every view from above, and the hull then
@@ -34,9 +34,14 @@ from ..object_frame import camera_up, pixels_of, support_plane
 from .views import Plane, View
 
 FLOOR, OBJECT, UNKNOWN, OUTSIDE = 0, 1, 2, 3
+LABELS = {"floor": FLOOR, "object": OBJECT, "no_evidence": UNKNOWN, "room": OUTSIDE}  # names for the report
 PLANE_SEARCH_RADIUS = 3.0  # the plane is fitted to the points within this many sphere radii of the centre
 MIN_TRACK_POINTS = 20  # fewer points than this: no evidence
 OBJECT_CLEARANCE = 2.0  # an object point lies this many plane thicknesses above it (carpet pile lies within)
+# The floor an object stands on touches its bounding sphere, but the sphere here is centred where the cameras
+# aim, so the floor may lie a little below it: on the suite the standing objects' floors lay 0.42-1.01 radii
+# below the centre, the floors under a floating object or a table 1.25-1.99.
+BELOW_SPHERE = 0.1
 
 
 @dataclass(frozen=True)
@@ -67,7 +72,8 @@ def tracks_for_views(xyz: np.ndarray, observers: Sequence[Sequence[str]], names:
 def track_plane(tracks: Tracks, views: Sequence[View], tolerance: float, seed: int = 0) -> Plane | None:
     """The support plane fitted to the points by RANSAC, in the frame where the object lies in the unit sphere, or
     None: too few points near the object, no dominant plane along the cameras' up, or one that does not cut the
-    sphere (the object stands on what it touches; a floor under a table or under a floating object is not that).
+    sphere or come within ``BELOW_SPHERE`` of it (the object stands on what it touches; a floor under a table or
+    under a floating object is not that).
     ``tolerance``: the plane's thickness as a share of the median distance of the fitted points from the origin;
     ``consistent_fraction``: the share of those points on it."""
     dist = np.linalg.norm(tracks.xyz, axis=1)
@@ -83,7 +89,7 @@ def track_plane(tracks: Tracks, views: Sequence[View], tolerance: float, seed: i
     normal = np.linalg.svd(flat - flat.mean(0))[2][2]
     normal = normal if normal @ up > 0 else -normal
     offset = float(normal @ flat.mean(0))
-    if not -1.0 < offset < 0.0:
+    if not -1.0 - BELOW_SPHERE < offset < 0.0:
         return None
     return Plane(normal, offset, float(on.mean()), thickness)
 

@@ -5,10 +5,12 @@ the images its cameras point at (the decode stage's folder, or ``poses/undistort
 resampled the photos: the masks are in the pixel grid of the images training reads). Optional: user masks.
 
 **Automatic masks** (no downloaded weights): :mod:`pipeline.masking` -- the unit sphere's image as a prior,
-the support plane found by photo-consistency (the floor and its shadows are background), a depth sweep
-outside the sphere (props in front, the room behind) and, against each round's hull, one between the cameras and
-the hull (props standing in front inside the sphere: their tops and the sides under them), the floor seen
-through the hull (holes, overhangs), GrabCut per view, made to agree by visual-hull carving, a few rounds.
+the poses stage's sparse points where each photo saw them (on the floor or far: background; clearly above the
+floor in the sphere: object), the support plane found by photo-consistency (the floor and its shadows are
+background), a depth sweep outside the sphere (props in front, the room behind) and, against each round's hull,
+one between the cameras and the hull (props standing in front inside the sphere: their tops and the sides under
+them), the floor seen through the hull (holes, overhangs), GrabCut per view, made to agree by visual-hull
+carving, a few rounds.
 Segmentation runs at ``masks.work_size``; the masks are written at full size, their outline snapped to the
 photo's edges by a guided filter. The method's failure cases are in that module's doc and the README.
 
@@ -182,7 +184,7 @@ def run_masks(
         refuse_empty(areas, user_files, config.user_mask_min_fraction)
         if len(fixed) == len(views):
             log.info("every view has a user mask: the automatic method is skipped")
-            final, plane, rounds = [fixed[i] for i in range(len(views))], None, []
+            final, plane, rounds, labelled = [fixed[i] for i in range(len(views))], None, [], None
             # the hull is carved in a sphere: grown while the masks reach past it, or the object is cut
             prior = find_prior_sphere(views, opts, lambda vs, o, c, r: final)
             views = [in_sphere_frame(v, prior.centre, prior.radius) for v in views]
@@ -198,7 +200,7 @@ def run_masks(
             task = bar.add_task("segment", total=1 + 2 * n + opts.rounds * (1 + n) + (opts.rounds - 1) * n)
             seg = segment(views, opts, fixed=fixed, on_step=lambda label: bar.advance(task),
                           tracks=tracks.framed(prior.centre, prior.radius) if tracks is not None else None)
-            final, plane, rounds = seg.masks, seg.plane, seg.rounds
+            final, plane, rounds, labelled = seg.masks, seg.plane, seg.rounds, seg.track_labels
 
         # The hull of the final masks: the views' agreement and the object's bounding sphere.
         points, index = hull_grid(opts.hull_resolution, plane)
@@ -274,6 +276,10 @@ def run_masks(
                                                         ply if sparse is not None else None))
         report = _report(records, agreement, (centre, radius, sphere is not None), config, plane, rounds, warnings,
                          scale, user_dir, time.time() - started)
+        report["sparse_points"] = {
+            "what": "the poses stage's sparse points by where they lie (pipeline.masking.tracks), in the final "
+            "sphere prior: each photo that observed one takes it as object or background (no_evidence: neither)",
+            "points": None if tracks is None else len(tracks.xyz), "labels": labelled}
         report["sphere_prior"] = {
             "what": "the sphere segmentation and the hull ran in (poses frame): the poses stage's unit sphere, "
             "grown while the probe's masks (the user's, when every view has one) reached its outline "

@@ -128,7 +128,7 @@ def test_the_plane_is_the_floor_under_the_object_and_none_when_the_floor_is_out_
     assert plane is not None and plane.thickness > 0
     assert abs(plane.offset - FLOOR_Z) < 1e-6 and plane.normal[2] > 1 - 1e-9
     # a floating object: the floor is below its sphere, and what lies above that floor is not all object
-    low = xyz - np.array([0.0, 0.0, 0.8]) * (np.arange(len(xyz)) < len(parts["floor"]))[:, None]
+    low = xyz - np.array([0.0, 0.0, 0.6]) * (np.arange(len(xyz)) < len(parts["floor"]))[:, None]
     tracks = tracks_for_views(low, observers(low, views), [v.name for v in views])
     assert track_plane(tracks, views, tolerance=0.02) is None
     assert not (label_points(tracks, None, far=3.0) == OBJECT).any()

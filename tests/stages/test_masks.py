@@ -182,3 +182,7 @@ def test_automatic_masks_of_the_sphere_with_two_corrections(sfm_sphere_capture, 
     assert result.sphere_radius < 0.8
     report = load_masks(tmp_path / "masks").report  # the floor was found: no warning about it
     assert report["support_plane"] is not None and not any("no support plane" in w for w in report["warnings"])
+    # the known cameras' triangulated points seeded the masks: the floor's as background
+    sparse = report["sparse_points"]
+    print("sparse points", sparse["points"], sparse["labels"])
+    assert sparse["points"] > 100 and sparse["labels"]["floor"] > 0.2 * sparse["points"]
