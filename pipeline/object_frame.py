@@ -155,6 +155,13 @@ def support_plane(points: np.ndarray, up: np.ndarray, tolerance: float, rng: np.
     return best
 
 
+def plane_normal(points: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """``(3,)`` unit normal of the least-squares plane through ``points`` ``(M, 3)``, on ``up``'s side. The thin
+    SVD: the full one makes an ``(M, M)`` matrix (2 GB for the blowtorch's 12000 floor points)."""
+    n = np.linalg.svd(points - points.mean(0), full_matrices=False)[2][2]
+    return n if n @ up > 0 else -n
+
+
 def footprint_radius(center: np.ndarray, c2w: np.ndarray, K: np.ndarray, sizes: np.ndarray, window: float) -> float:
     """Radius of the sphere at ``center`` that fills ``window`` of the shorter image side, median over cameras."""
     dist = np.linalg.norm(c2w[:, :3, 3] - center, axis=1)
@@ -280,8 +287,7 @@ def find_object(
                                  rng=np.random.default_rng(seed))
         if on_plane.any():
             on = near[on_plane]
-            n = np.linalg.svd(on - on.mean(0))[2][2]
-            n = n if n @ up > 0 else -n
+            n = plane_normal(on, up)
             plane = (n, float(n @ on.mean(0)))
             used = int(on_plane.sum())
             notes.append(f"support plane {float(n @ center) - plane[1]:.3g} below the centre ({used} points)")

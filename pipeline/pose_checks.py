@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from .config import PosesConfig
-from .object_frame import axes_convergence, camera_up, support_plane, window_fraction
+from .object_frame import axes_convergence, camera_up, plane_normal, support_plane, window_fraction
 
 EXIF_TIME = "%Y:%m:%d %H:%M:%S"  # EXIF DateTimeOriginal
 MAD_TO_SIGMA = 1.4826  # the MAD of a normal distribution times this is its standard deviation
@@ -298,8 +298,7 @@ def up_check(points: np.ndarray, up: np.ndarray, center: np.ndarray, limit_deg: 
     if on.sum() < MIN_PLANE_POINTS:
         return UpCheck(None, int(on.sum()), m, limit_deg)
     plane = points[on]
-    normal = np.linalg.svd(plane - plane.mean(0))[2][2]
-    normal = normal if normal @ up > 0 else -normal
+    normal = plane_normal(plane, up)
     angle = float(np.degrees(np.arccos(np.clip(normal @ up / np.linalg.norm(up), -1.0, 1.0))))
     return UpCheck(angle, int(on.sum()), m, limit_deg, [float(v) for v in normal])
 

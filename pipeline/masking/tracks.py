@@ -13,8 +13,8 @@ point lies tells what that pixel shows:
 - anything else (just above the floor, below it, between the sphere and ``track_far``): no evidence.
 
 The plane is fitted to the points by RANSAC (:func:`pipeline.object_frame.support_plane`, the poses stage's),
-normal within 30 degrees of the cameras' up, and must cut the sphere (or nearly). Without one nothing inside the sphere is
-labelled: the floor and the object cannot be told apart by position alone.
+normal within 30 degrees of the cameras' up, and must cut the sphere (or nearly). Without one nothing inside the
+sphere is labelled: the floor and the object cannot be told apart by position alone.
 
 Why: colour alone loses a dark handle on a dark carpet shadow in every view from above, and the hull then
 carves it away for good; a handful of features on it, seen from many sides, keep it. On the real blowtorch
@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..object_frame import camera_up, pixels_of, support_plane
+from ..object_frame import camera_up, pixels_of, plane_normal, support_plane
 from .views import Plane, View
 
 FLOOR, OBJECT, UNKNOWN, OUTSIDE = 0, 1, 2, 3
@@ -86,8 +86,7 @@ def track_plane(tracks: Tracks, views: Sequence[View], tolerance: float, seed: i
     if not on.any():
         return None
     flat = near[on]
-    normal = np.linalg.svd(flat - flat.mean(0))[2][2]
-    normal = normal if normal @ up > 0 else -normal
+    normal = plane_normal(flat, up)
     offset = float(normal @ flat.mean(0))
     if not -1.0 - BELOW_SPHERE < offset < 0.0:
         return None

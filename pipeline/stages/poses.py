@@ -166,9 +166,11 @@ def run_poses(
             posed, reconstruction = known_cameras(known_file, names, width, height)
             source = str(known_file)
             if reconstruction is None and config.triangulate_known:
-                reconstruction = triangulate_known(posed, decoded.folder / SRGB, tmp / "work", config)
-                posed.stats["points3D"] = reconstruction.num_points3D()
+                triangulated = triangulate_known(posed, decoded.folder / SRGB, tmp / "work", config)
                 shutil.rmtree(tmp / "work")
+                posed.stats["points3D"] = triangulated.num_points3D()
+                if triangulated.num_points3D():  # none: no model, as before (training then has no sparse depth)
+                    reconstruction = triangulated
         else:
             duplicates = check_not_identical({n: thumbnail(decoded.srgb(n)) for n in names}, photo_dir)
             if duplicates:
