@@ -78,15 +78,21 @@ def assert_no_output(out: Path) -> None:
 # ------------------------------------------------------------------------------------- known cameras
 
 
-def test_known_transforms_json_skips_sfm_and_round_trips(tiny_capture, tiny_decode, tmp_path):
-    """A capture with its own transforms.json: cameras.json holds the same cameras, in the normalized frame;
-    to_colmap maps them back to the file's frame exactly."""
-    truth = load_cameras(tiny_capture / "ground_truth" / "cameras.json")
+def with_known_transforms(source: Path, decode: Path, tmp_path: Path):
+    """The poses stage on a capture whose transforms.json holds ``source``'s true cameras (into tmp_path/poses)."""
+    truth = load_cameras(source / "ground_truth" / "cameras.json")
     capture = tmp_path / "capture"
     capture.mkdir()
     save_transforms(capture / "transforms.json", truth)
-    result = run(capture, tiny_decode, tmp_path / "poses")
+    result = run(capture, decode, tmp_path / "poses")
     assert result.source.endswith("transforms.json") and result.registered == len(truth)
+    return truth, capture
+
+
+def test_known_transforms_json_skips_sfm_and_round_trips(tiny_capture, tiny_decode, tmp_path):
+    """A capture with its own transforms.json: cameras.json holds the same cameras, in the normalized frame;
+    to_colmap maps them back to the file's frame exactly."""
+    truth, capture = with_known_transforms(tiny_capture, tiny_decode, tmp_path)
     out = load_cameras(tmp_path / "poses" / "cameras.json")
     to_file = np.asarray(out.frame.to_colmap)
     scale = np.cbrt(np.linalg.det(to_file[:3, :3]))
@@ -117,17 +123,16 @@ def test_known_cameras_get_sparse_points_triangulated_with_them(sfm_sphere_captu
     given -- hundreds of points, reprojecting within a pixel, the cameras unchanged; the masks stage and training
     read them like SfM's."""
     from pipeline.results import load_poses
+    from pipeline.sfm import camera_to_world, stem_of
     from pipeline.sparse_depth import load_sparse_points
 
-    truth = load_cameras(sfm_sphere_capture / "ground_truth" / "cameras.json")
-    capture = tmp_path / "capture"
-    capture.mkdir()
-    save_transforms(capture / "transforms.json", truth)
-    result = run(capture, sfm_sphere_decode, tmp_path / "poses")
-    assert result.source.endswith("transforms.json") and result.registered == len(truth)
+    truth, capture = with_known_transforms(sfm_sphere_capture, sfm_sphere_decode, tmp_path)
     rec = load_poses(tmp_path / "poses").reconstruction()
     assert rec.num_reg_images() == len(truth)
     assert rec.num_points3D() > 300 and rec.compute_mean_reprojection_error() < 1.0, rec.summary()
+    given = truth.by_name()
+    for image in rec.images.values():  # the model is in the file's frame, its cameras the file's
+        np.testing.assert_allclose(camera_to_world(image), given[stem_of(image.name)].c2w, atol=1e-6)
     cams = load_cameras(tmp_path / "poses" / "cameras.json")
     points = load_sparse_points(tmp_path / "poses" / "sparse", cams)
     assert len(points.xyz) > 100 and all(len(o) >= 3 for o in points.observers)
