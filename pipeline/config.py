@@ -331,8 +331,8 @@ class MasksConfig(StrictModel):
     )
     tracks: bool = Field(
         True, description="seed the masks with the poses stage's sparse points: in each photo that observed a point, "
-        "one on the support plane or outside the object's sphere is certain background and one above the plane "
-        "inside the sphere certain object (pipeline.masking.tracks)"
+        "one on the plane fitted to them or far outside the object's sphere is certain background and one clearly "
+        "above that plane inside the sphere certain object (pipeline.masking.tracks)"
     )
     track_plane_tolerance: float = Field(
         0.02, gt=0, lt=1, description="...points this close to the plane fitted to them (share of their median "
