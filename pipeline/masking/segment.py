@@ -93,15 +93,19 @@ def gather_evidence(views: Sequence[View], opts: SegmentOptions, fixed: dict[int
     fixed = fixed or {}
     nbrs = neighbours(views, opts.neighbours, opts.neighbour_max_deg)
     use_tracks = tracks is not None and opts.tracks
-    labels = label_points(tracks, track_plane(tracks, views, opts.track_plane_tolerance), opts.track_far) \
-        if use_tracks else None
-    plane = find_support_plane(views, nbrs, opts) if opts.floor else None
+    sparse_plane = track_plane(tracks, views, opts.track_plane_tolerance) if use_tracks else None
+    labels = label_points(tracks, sparse_plane, opts.track_far) if use_tracks else None
+    plane = None
+    if opts.floor:
+        use_sparse = opts.track_support_plane and sparse_plane is not None
+        plane = sparse_plane if use_sparse else find_support_plane(views, nbrs, opts)
     step("support plane")
     if plane is not None:
-        log.info("support plane %.3f below the centre, tilt %.1f deg from the cameras' up, explains %.0f %% of the "
-                 "pixels around the object", -plane.offset,
+        log.info("support plane %.3f below the centre, tilt %.1f deg from the cameras' up, %s", -plane.offset,
                  np.degrees(np.arccos(np.clip(plane.normal @ camera_up(np.stack([v.c2w for v in views])), -1, 1))),
-                 100 * plane.consistent_fraction)
+                 f"fitted to {100 * plane.consistent_fraction:.0f} % of the sparse points near the object"
+                 if plane.thickness else
+                 f"explains {100 * plane.consistent_fraction:.0f} % of the pixels around the object")
 
     spheres = [sphere_distance(v) for v in views]
     floors: list[np.ndarray | None] = []

@@ -132,3 +132,21 @@ def test_the_plane_is_the_floor_under_the_object_and_none_when_the_floor_is_out_
     tracks = tracks_for_views(low, observers(low, views), [v.name for v in views])
     assert track_plane(tracks, views, tolerance=0.02) is None
     assert not (label_points(tracks, None, far=3.0) == OBJECT).any()
+
+
+def test_the_points_plane_is_the_support_plane_only_when_asked():
+    from dataclasses import replace
+
+    from pipeline.masking.segment import gather_evidence
+    from pipeline.masking.views import SegmentOptions
+
+    views = ring(8, size=(80, 60))
+    parts = scene(np.random.default_rng(5))
+    xyz = np.concatenate([parts["floor"], parts["ball"]])
+    tracks = tracks_for_views(xyz, observers(xyz, views), [v.name for v in views])
+    opts = SegmentOptions(sweep=False)
+    asked = gather_evidence(views, replace(opts, track_support_plane=True), tracks=tracks)
+    assert asked.plane is not None and asked.plane.thickness > 0 and abs(asked.plane.offset - FLOOR_Z) < 1e-6
+    assert asked.track_labels["object"] > 0 and asked.track_labels["floor"] > 0
+    default = gather_evidence(views, opts, tracks=tracks)  # photo-consistency's (blank photos: any height)
+    assert default.plane is None or default.plane.thickness == 0
