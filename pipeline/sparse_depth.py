@@ -108,6 +108,17 @@ class DepthObservations:
     points_on_object: int
 
 
+def observation_pairs(observers: Sequence[Sequence[str]], names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Every (point, photo that saw it) pair, in the order of the points: ``(P,)`` int64 point indices and
+    ``(P,)`` int64 indices into ``names`` (observers not among ``names`` are left out)."""
+    index = {n: i for i, n in enumerate(names)}
+    pairs = [(k, index[name]) for k, seen_by in enumerate(observers) for name in seen_by if name in index]
+    if not pairs:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    point, image = (np.asarray(a, np.int64) for a in zip(*pairs))
+    return point, image
+
+
 def depth_observations(
     points: SparsePoints, names: Sequence[str], K: np.ndarray, c2w: np.ndarray, masks: np.ndarray,
     object_margin_px: int,
@@ -118,15 +129,12 @@ def depth_observations(
     Args:
         names: ``N`` image names; K ``(N, 3, 3)``, c2w ``(N, 4, 4)``, masks ``(N, H, W)`` bool, as trained on.
     """
-    index = {n: i for i, n in enumerate(names)}
     _, h, w = masks.shape
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * object_margin_px + 1,) * 2)
-    # every (point, photo that saw it) pair, in the order of the points
-    pairs = [(k, index[name]) for k, seen_by in enumerate(points.observers) for name in seen_by if name in index]
-    point, image = (np.asarray(a, np.int64) for a in zip(*pairs)) if pairs else (np.zeros(0, np.int64),) * 2
-    uv = np.zeros((len(pairs), 2))
-    seen = np.zeros(len(pairs), bool)  # in front of the camera and inside its photo
-    near = np.zeros(len(pairs), bool)
+    point, image = observation_pairs(points.observers, names)
+    uv = np.zeros((len(point), 2))
+    seen = np.zeros(len(point), bool)  # in front of the camera and inside its photo
+    near = np.zeros(len(point), bool)
     for i in np.unique(image):
         sel = np.nonzero(image == i)[0]
         pix, z = project(points.xyz[point[sel]], c2w[i][None], K[i][None])

@@ -28,9 +28,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from ..object_frame import camera_up, pixels_of, plane_normal, support_plane
+from ..sparse_depth import observation_pairs
 from .views import Plane, View
 
 FLOOR, OBJECT, UNKNOWN, OUTSIDE = 0, 1, 2, 3
@@ -60,13 +62,8 @@ class Tracks:
 def tracks_for_views(xyz: np.ndarray, observers: Sequence[Sequence[str]], names: Sequence[str]) -> Tracks:
     """:class:`Tracks` from points ``(M, 3)`` and the names of the photos that observed each, for the views
     ``names`` (observers that are not among them are ignored)."""
-    index = {n: i for i, n in enumerate(names)}
-    seen: list[list[int]] = [[] for _ in names]
-    for p, obs in enumerate(observers):
-        for n in obs:
-            if n in index:
-                seen[index[n]].append(p)
-    return Tracks(np.asarray(xyz, np.float64).reshape(-1, 3), [np.asarray(s, np.int64) for s in seen])
+    point, image = observation_pairs(observers, names)
+    return Tracks(np.asarray(xyz, np.float64).reshape(-1, 3), [point[image == i] for i in range(len(names))])
 
 
 def track_plane(tracks: Tracks, views: Sequence[View], tolerance: float, seed: int = 0) -> Plane | None:
@@ -118,8 +115,8 @@ def seed_maps(view: View, tracks: Tracks, seen: np.ndarray, labels: np.ndarray,
         return obj, bg
     inside, x, y = pixels_of(tracks.xyz[seen], view.c2w, view.K, (h, w))
     kind = labels[seen][inside]
+    square = np.ones((2 * radius_px + 1,) * 2, np.uint8)
     for out, chosen in ((obj, kind == OBJECT), (bg, (kind == FLOOR) | (kind == OUTSIDE))):
-        for dy in range(-radius_px, radius_px + 1):
-            for dx in range(-radius_px, radius_px + 1):
-                out[np.clip(y[chosen] + dy, 0, h - 1), np.clip(x[chosen] + dx, 0, w - 1)] = True
+        out[y[chosen], x[chosen]] = True
+        out[:] = cv2.dilate(out.view(np.uint8), square) > 0
     return obj, bg
