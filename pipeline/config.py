@@ -289,6 +289,14 @@ class MasksConfig(StrictModel):
         0.03, gt=0, lt=1, description="mean absolute sRGB difference (0..1, 5x5 box) under which the plane explains "
         "a pixel"
     )
+    floor_shift: float = Field(
+        0.3, ge=0, description="a floor pixel must match at the support plane's height only: the plane moved this "
+        "far down (sphere radii) must explain it worse (flat patches, on the object or the floor, match at any "
+        "height and are no evidence); 0: no such test"
+    )
+    floor_margin: float = Field(
+        0.03, ge=0, lt=1, description="by at least this much (as floor_threshold)"
+    )
     sweep: bool = Field(
         True, description="sweep depths outside the unit sphere: props in front of the object and the room behind it "
         "that match across views are background"

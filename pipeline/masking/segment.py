@@ -13,7 +13,7 @@ from ..metrics import iou
 from ..object_frame import camera_up
 from .grabcut import first_seeds, grabcut, hull_seeds
 from .hull import OUTSIDE_VOTES, carve, carve_votes, hull_depth, hull_grid
-from .support_plane import find_support_plane, floor_from_cost, plane_cost
+from .support_plane import find_support_plane, floor_evidence
 from .sweeps import floor_through_hull, front_evidence, occluded_region, occluder_evidence
 from .tracks import LABELS, Tracks, label_points, seed_maps, track_plane
 from .views import Plane, SegmentOptions, View, disc, neighbours, sphere_distance, spread
@@ -127,10 +127,9 @@ def gather_evidence(views: Sequence[View], opts: SegmentOptions, fixed: dict[int
         else:
             occluded.append(None)
         if plane is not None:
-            cost = plane_cost(v, [views[j] for j in nbrs[i]], plane.normal, plane.offset, opts.consistency_rank,
-                              match_exposure=opts.match_exposure)
-            floors.append(floor_from_cost(cost, outside, opts))
-            above.append((cost > opts.not_floor_threshold) & ~outside)
+            floor, not_floor = floor_evidence(v, [views[j] for j in nbrs[i]], plane, outside, opts)
+            floors.append(floor)
+            above.append(not_floor)
         else:
             floors.append(None)
             above.append(None)

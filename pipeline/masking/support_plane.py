@@ -144,8 +144,22 @@ def find_support_plane(views: Sequence[View], nbrs: Sequence[Sequence[int]], opt
     return Plane(normal, float(offset), fraction)
 
 
-def floor_from_cost(cost: np.ndarray, outside: np.ndarray, opts: SegmentOptions) -> np.ndarray:
-    """Pixels of the sphere's image the support plane explains; an opening drops isolated specks (chance
-    matches on the object's flat patches)."""
-    floor = ((cost < opts.floor_threshold) & ~outside).astype(np.uint8)
-    return cv2.morphologyEx(floor, cv2.MORPH_OPEN, disc(1)) > 0
+def floor_evidence(view: View, others: Sequence[View], plane: Plane, outside: np.ndarray,
+                   opts: SegmentOptions) -> tuple[np.ndarray, np.ndarray]:
+    """``(floor, above)``, each ``(H, W)`` bool over the sphere's image (not ``outside``): pixels the support
+    plane explains, and pixels it clearly does not (cost over ``not_floor_threshold``).
+
+    A floor pixel must match at the plane's height *only*: the same plane moved ``floor_shift`` sphere radii down
+    must explain it worse by ``floor_margin``. A flat patch matches under any homography -- a dark floating torus
+    whose neighbours see more of the same torus where the plane puts its floor, a plain table -- and is no
+    evidence either way. An opening drops isolated specks (chance matches on the object's flat patches)."""
+    cost = plane_cost(view, others, plane.normal, plane.offset, opts.consistency_rank,
+                      match_exposure=opts.match_exposure)
+    floor = (cost < opts.floor_threshold) & ~outside
+    if opts.floor_shift > 0:
+        for shift in (-opts.floor_shift, opts.floor_shift):
+            shifted = plane_cost(view, others, plane.normal, plane.offset + shift, opts.consistency_rank,
+                                 match_exposure=opts.match_exposure)
+            floor &= shifted >= cost + opts.floor_margin
+    floor = cv2.morphologyEx(floor.astype(np.uint8), cv2.MORPH_OPEN, disc(1)) > 0
+    return floor, (cost > opts.not_floor_threshold) & ~outside

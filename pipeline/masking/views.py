@@ -59,6 +59,8 @@ class SegmentOptions:
     neighbour_max_deg: float = 60.0
     consistency_rank: int = 3
     floor_threshold: float = 0.03
+    floor_shift: float = 0.3
+    floor_margin: float = 0.03
     match_exposure: bool = False
     floor: bool = True
     not_floor_threshold: float = 0.12

@@ -10,7 +10,13 @@ import numpy as np
 from pipeline.cameras import look_at
 from pipeline.masking.hull import carve, hull_depth, hull_grid, in_hull, reproject
 from pipeline.masking.prior import find_prior_sphere, in_sphere_frame
-from pipeline.masking.support_plane import exposure_gains, find_support_plane, plane_cost, sorted_elementwise
+from pipeline.masking.support_plane import (
+    exposure_gains,
+    find_support_plane,
+    floor_evidence,
+    plane_cost,
+    sorted_elementwise,
+)
 from pipeline.masking.sweeps import column_image, column_in_hull, corner_strength, floor_through_hull, front_evidence
 from pipeline.masking.views import (
     Plane,
@@ -396,3 +402,31 @@ def ball_distance(view: View, centre: np.ndarray) -> np.ndarray:
     rays = pixel_rays(view)
     along = rays @ to_centre
     return np.where(along > 0, np.linalg.norm(to_centre - along[..., None] * rays, axis=-1), np.inf)
+
+
+def test_a_flat_patch_is_no_floor_evidence_and_the_textured_floor_is():
+    """A plain brown ball (radius 0.4) floating over a textured floor (z = -0.9). Neighbouring views see more of
+    the ball where the floor's homography puts the floor behind it, so the plane explains the ball's pixels as well
+    as the floor's; only the test at a second height tells them apart: the ball matches there too, the floor
+    does not."""
+    texture = cell_texture(3)
+    views, balls = close_ring(24), []
+    for view in views:
+        o, d = view.c2w[:3, 3], pixel_rays(view)
+        ball = mirror_ball(view, 0.4)[0]
+        p = o + d * ((-0.9 - o[2]) / d[..., 2])[..., None]
+        image = texture(8 * p[..., 0], 8 * p[..., 1])
+        image[ball] = (70, 40, 25)
+        view.image = cv2.GaussianBlur(image, (0, 0), 0.7)
+        balls.append(ball)
+    nbrs = neighbours(views, 6, 60.0)
+    for shift, ball_found in ((0.0, 0.3), (0.3, 0.02)):
+        opts = SegmentOptions(floor_shift=shift)
+        for i in range(0, len(views), 4):
+            outside = sphere_distance(views[i]) >= 1.0
+            floor, _ = floor_evidence(views[i], [views[j] for j in nbrs[i]], FLOOR, outside, opts)
+            on_ball = (floor & balls[i]).sum() / balls[i].sum()
+            assert on_ball > ball_found if shift == 0 else on_ball <= ball_found
+            seen_floor = ~balls[i] & ~outside
+            # the rest is hidden by the ball or outside the neighbours' images
+            assert (floor & seen_floor).sum() > 0.4 * seen_floor.sum()
