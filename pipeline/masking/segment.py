@@ -173,6 +173,23 @@ def _log_found(r: int, what: str, views: Sequence[View], found: Sequence[np.ndar
         log.info("round %d: %s in %d view(s): %s", r + 1, what, len(names), ", ".join(names))
 
 
+def final_mask(colour: np.ndarray, hull: np.ndarray, background: np.ndarray, occluded: np.ndarray | None,
+               opts: SegmentOptions) -> np.ndarray:
+    """``(H, W)`` bool: a view's final mask from its last GrabCut mask ``colour`` and the hull's reprojection
+    ``hull``. The hull -- the views agree on it, and it keeps what one view's colours lose (a glossy rim mirroring
+    the background, a dark bottom on its dark shadow) -- within ``final_reach_px`` of ``colour`` (the view's
+    colours trim the hull's overhang at the outline), less what this view knows the hull cannot: certain
+    ``background`` and, with ``final_reach_px`` -1, the pieces GrabCut gave to a prop in front (``occluded``).
+    Where ``colour`` disagrees with the hull (IoU under ``final_min_agreement``) the view's colours failed (a
+    shadowed side lost to a dark floor): the hull less certain background."""
+    if iou(colour, hull) < opts.final_min_agreement:
+        return hull & ~background
+    if opts.final_reach_px >= 0:
+        near = cv2.dilate(colour.astype(np.uint8), disc(opts.final_reach_px)) > 0 if opts.final_reach_px else colour
+        return hull & near & ~background
+    return hull & ~background & ~occluded_region(hull, colour, occluded)
+
+
 def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixed: dict[int, np.ndarray] | None = None,
            step: Callable[[str], None] = lambda label: None) -> Segmentation:
     """Rounds of carving and GrabCut from the ``evidence``, then the final masks (see the module doc)."""
@@ -227,17 +244,14 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
         log.info("round %d: GrabCut vs hull IoU median %.3f (worst %.3f); masks changed by %.3f IoU", r + 1,
                  rounds[-1]["agreement_median"], rounds[-1]["agreement_min"], 1 - rounds[-1]["change_median"])
         masks = new
-    # The final masks: the hull's reprojection -- the views agree on it, and it keeps what one view's colours
-    # lose (a glossy rim mirroring the background, a dark bottom on its dark shadow) -- less what this view
-    # knows the hull cannot: certain background (outside the sphere, swept) and, where a prop in front was
-    # seen, the pieces GrabCut gave to that prop.
-    final = []
+    final, failed = [], []
     for i, (m, h) in enumerate(zip(masks, hulls)):
         if i not in fixed:
-            if opts.final_reach_px >= 0:
-                near = cv2.dilate(m.astype(np.uint8), disc(opts.final_reach_px)) > 0 if opts.final_reach_px else m
-                m = h & near & ~backgrounds[i]
-            else:
-                m = h & ~backgrounds[i] & ~occluded_region(h, m, occluded[i])
+            if iou(m, h) < opts.final_min_agreement:
+                failed.append(views[i].name)
+            m = final_mask(m, h, backgrounds[i], occluded[i], opts)
         final.append(m)
+    if failed:
+        log.info("GrabCut disagrees with the hull (IoU < %.2f) in %d view(s), their masks are the hull's: %s",
+                 opts.final_min_agreement, len(failed), ", ".join(failed))
     return Segmentation(final, masks, hulls, floors, occluded, plane, volume, rounds, evidence.track_labels)
