@@ -273,10 +273,11 @@ class MasksConfig(StrictModel):
         "hull's overhang at the outline); -1: the hull's reprojection less certain background and the pieces "
         "GrabCut gave to a prop in front"
     )
-    final_min_agreement: float = Field(
-        0.8, ge=0, le=1, description="a view whose last GrabCut mask agrees with the hull's reprojection less than "
-        "this (IoU) gets the hull's reprojection less certain background: its colours failed (a shadowed side "
-        "lost to a dark floor), the views agree on the hull; 0: never"
+    final_max_core_lost: float = Field(
+        0.15, ge=0, le=1, description="a view whose last GrabCut mask gave more than this share of the hull's core "
+        "(its reprojection eroded by core_erode_px) to the background gets the hull's reprojection less certain "
+        "background: its colours failed (a shadowed side lost to a dark floor), the views agree on the hull; "
+        "1: never"
     )
     neighbours: int = Field(6, ge=1, description="views compared with each view (support-plane test)")
     neighbour_max_deg: float = Field(60.0, gt=0, le=180, description="...at most this far around the object")

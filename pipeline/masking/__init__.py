@@ -46,8 +46,8 @@ background: the hull keeps what one view's colours lose inside the object (a glo
 background, a dark bottom), the view's own colours trim the hull's overhang at the outline (the hull is
 larger than the object wherever fewer than ``carve_share`` of the views see past it) and cut the pieces of the
 hull hidden by a prop in front (GrabCut gives them to the prop). Where that view's GrabCut mask disagrees with the
-hull (IoU under ``final_min_agreement``, 0.8) its colours failed -- a shadowed side lost to a dark floor -- and
-its final mask is the hull's reprojection less certain background.
+hull (it left out more than ``final_max_core_lost``, 15 %, of the hull's eroded core) its colours failed -- a
+shadowed side lost to a dark floor -- and its final mask is the hull's reprojection less certain background.
 
 Failure cases (documented in the README): an object not standing on a visible textured plane (hanging,
 held, on a textureless table: cue 2 finds nothing and the contact shadow may stay in the masks); an

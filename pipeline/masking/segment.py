@@ -173,6 +173,15 @@ def _log_found(r: int, what: str, views: Sequence[View], found: Sequence[np.ndar
         log.info("round %d: %s in %d view(s): %s", r + 1, what, len(names), ", ".join(names))
 
 
+def core_lost(colour: np.ndarray, hull: np.ndarray, erode_px: int) -> float:
+    """The share of the hull's core (``hull`` ``(H, W)`` bool eroded by ``erode_px``) that the mask ``colour``
+    leaves out. Unlike their IoU it ignores the band along the outline, where the hull overhangs the object by a
+    pixel or two -- a large share of a small object's area."""
+    core = cv2.erode(hull.astype(np.uint8), disc(erode_px)) > 0
+    n = np.count_nonzero(core)
+    return float(np.count_nonzero(core & ~colour) / n) if n else 0.0
+
+
 def final_mask(colour: np.ndarray, hull: np.ndarray, background: np.ndarray, occluded: np.ndarray | None,
                opts: SegmentOptions) -> np.ndarray:
     """``(H, W)`` bool: a view's final mask from its last GrabCut mask ``colour`` and the hull's reprojection
@@ -180,9 +189,9 @@ def final_mask(colour: np.ndarray, hull: np.ndarray, background: np.ndarray, occ
     the background, a dark bottom on its dark shadow) -- within ``final_reach_px`` of ``colour`` (the view's
     colours trim the hull's overhang at the outline), less what this view knows the hull cannot: certain
     ``background`` and, with ``final_reach_px`` -1, the pieces GrabCut gave to a prop in front (``occluded``).
-    Where ``colour`` disagrees with the hull (IoU under ``final_min_agreement``) the view's colours failed (a
-    shadowed side lost to a dark floor): the hull less certain background."""
-    if iou(colour, hull) < opts.final_min_agreement:
+    Where ``colour`` lost more than ``final_max_core_lost`` of the hull's core (:func:`core_lost`) the view's
+    colours failed (a shadowed side lost to a dark floor): the hull less certain background."""
+    if core_lost(colour, hull, opts.core_erode_px) > opts.final_max_core_lost:
         return hull & ~background
     if opts.final_reach_px >= 0:
         near = cv2.dilate(colour.astype(np.uint8), disc(opts.final_reach_px)) > 0 if opts.final_reach_px else colour
@@ -247,11 +256,11 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
     final, failed = [], []
     for i, (m, h) in enumerate(zip(masks, hulls)):
         if i not in fixed:
-            if iou(m, h) < opts.final_min_agreement:
+            if core_lost(m, h, opts.core_erode_px) > opts.final_max_core_lost:
                 failed.append(views[i].name)
             m = final_mask(m, h, backgrounds[i], occluded[i], opts)
         final.append(m)
     if failed:
-        log.info("GrabCut disagrees with the hull (IoU < %.2f) in %d view(s), their masks are the hull's: %s",
-                 opts.final_min_agreement, len(failed), ", ".join(failed))
+        log.info("GrabCut left out more than %.0f %% of the hull's core in %d view(s), their masks are the hull's: "
+                 "%s", 100 * opts.final_max_core_lost, len(failed), ", ".join(failed))
     return Segmentation(final, masks, hulls, floors, occluded, plane, volume, rounds, evidence.track_labels)

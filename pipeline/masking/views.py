@@ -75,7 +75,7 @@ class SegmentOptions:
     doubtful_vote: float = 0.5
     dark_level: int = 48
     final_reach_px: int = 1
-    final_min_agreement: float = 0.8
+    final_max_core_lost: float = 0.15
     front_sweep: bool = True
     front_step: float = 0.01
     front_margin: float = 0.1
