@@ -256,7 +256,8 @@ class MasksConfig(StrictModel):
     carve_votes: int = Field(3, ge=1, description="...and at least this many views (1: the classic visual hull)")
     seed_radius: float = Field(
         0.3, ge=0, lt=1, description="before any hull, the central part of the unit sphere's image (this fraction of "
-        "its radius) is taken as object: the cameras converge on it"
+        "its radius) is taken as object: the cameras converge on it (of the first sphere's radius when the sphere prior "
+        "grows)"
     )
     doubtful_vote: float = Field(
         0.5, ge=0, le=1, description="a background vote counts this much where the view's pixel is dark (see "
@@ -302,6 +303,21 @@ class MasksConfig(StrictModel):
     )
     floor_margin: float = Field(
         0.03, ge=0, lt=1, description="by at least this much (as floor_threshold)"
+    )
+    floor_measure: Literal["sad", "zncc", "both"] = Field(
+        "sad", description="how the support plane's photo-consistency is measured: 'sad', the mean absolute sRGB "
+        "difference (floor_threshold, floor_margin); 'zncc', one minus the normalized cross-correlation of the grey "
+        "images (zncc_*): blind to exposure and white balance, and it tells a fine texture's match from a near miss "
+        "(a carpet's weave), but a plain floor or a shadow gives it no evidence; 'both': floor where either finds it"
+    )
+    zncc_window: int = Field(7, ge=3, description="'zncc': the window's side in pixels at work_size")
+    zncc_min_std: float = Field(
+        2.0, ge=0, description="'zncc': windows flatter than this (grey levels, 0..255) are no evidence"
+    )
+    zncc_floor_threshold: float = Field(0.5, gt=0, lt=2, description="'zncc': as floor_threshold (0..2)")
+    zncc_floor_margin: float = Field(0.3, ge=0, lt=2, description="'zncc': as floor_margin")
+    zncc_not_floor_threshold: float = Field(
+        0.8, gt=0, lt=2, description="'zncc': a textured pixel costing more is not the floor (seeds the first masks)"
     )
     sweep: bool = Field(
         True, description="sweep depths outside the unit sphere: props in front of the object and the room behind it "

@@ -78,6 +78,14 @@ def probe_options(opts: SegmentOptions) -> SegmentOptions:
     return replace(opts, rounds=1, floor=False, sweep=False, front_sweep=False, through_floor=False)
 
 
+def framed_options(opts: SegmentOptions, radius: float) -> SegmentOptions:
+    """``opts`` for views framed by a sphere of ``radius`` (in units of the first sphere): the disc taken as
+    certain object keeps the size it has in the first sphere, where the cameras converge. A sphere grows because
+    the object reaches past it somewhere, not because its core is wider: grown with it, the disc takes in the
+    background between an object's parts (a real blowtorch's handle and tank)."""
+    return replace(opts, seed_radius=opts.seed_radius / radius)
+
+
 def find_prior_sphere(views: Sequence[View], opts: SegmentOptions,
                       segment: Callable[[Sequence[View], SegmentOptions, np.ndarray, float], list[np.ndarray]]
                       ) -> PriorSphere:
@@ -89,7 +97,7 @@ def find_prior_sphere(views: Sequence[View], opts: SegmentOptions,
     cheap = probe_options(opts)
     while True:
         framed = [in_sphere_frame(v, centre, radius) for v in views]
-        masks = segment(framed, cheap, centre, radius)
+        masks = segment(framed, framed_options(cheap, radius), centre, radius)
         touching = touching_views(masks, framed)
         probes.append({"radius": radius, "centre": centre.tolist(), "touching_views": touching})
         log.info("sphere prior radius %.2f: the probe's masks reach its outline in %d of %d views", radius, touching,

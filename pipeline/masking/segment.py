@@ -98,7 +98,7 @@ def gather_evidence(views: Sequence[View], opts: SegmentOptions, fixed: dict[int
     plane = None
     if opts.floor:
         use_sparse = opts.track_support_plane and sparse_plane is not None
-        plane = sparse_plane if use_sparse else find_support_plane(views, nbrs, opts)
+        plane = sparse_plane if use_sparse else find_support_plane(views, nbrs, opts, start=sparse_plane)
     step("support plane")
     if plane is not None:
         log.info("support plane %.3f below the centre, tilt %.1f deg from the cameras' up, %s", -plane.offset,

@@ -33,13 +33,36 @@ def exposure_gains(image: np.ndarray, warped: np.ndarray, seen: np.ndarray, min_
     return np.clip((a + 1.0) / (b + 1.0), 1.0 / limit, limit).astype(np.float32)
 
 
+def window_stats(grey: np.ndarray, window: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(h, w)`` float32 grey -> its mean and variance over a ``window`` box around each pixel."""
+    mean = cv2.blur(grey, (window, window))
+    return mean, np.maximum(cv2.blur(grey * grey, (window, window)) - mean * mean, 0.0)
+
+
+def zncc_cost(grey: np.ndarray, stats: tuple[np.ndarray, np.ndarray], warped: np.ndarray, window: int,
+              min_std: float) -> np.ndarray:
+    """``(h, w)`` float32: one minus the zero-mean normalized cross-correlation of ``grey`` (its
+    :func:`window_stats` ``stats``) and ``warped`` (both ``(h, w)`` float32 grey, 0..255) over a ``window`` box,
+    0 (same pattern) .. 2 (inverted); ``inf`` where either window is flatter than ``min_std`` grey levels (no
+    pattern to compare: a plain floor matches at any height). Unlike a colour difference it ignores the photos'
+    exposure, white balance and tone curve, and on a fine texture (a carpet's weave) it tells aligned from
+    misaligned where a difference of colours is as large for both."""
+    mean, var = stats
+    w_mean, w_var = window_stats(warped, window)
+    cov = cv2.blur(grey * warped, (window, window)) - mean * w_mean
+    flat = np.minimum(var, w_var) < min_std * min_std
+    cost = 1.0 - cov / np.sqrt(np.maximum(var * w_var, 1e-6))
+    return np.where(flat, np.float32(np.inf), cost).astype(np.float32)
+
+
 def plane_cost(view: View, others: Sequence[View], normal: np.ndarray, offset: float, rank: int,
                window: int = 5, box: tuple[int, int, int, int] | None = None, min_views: int = 2,
-               match_exposure: bool = False) -> np.ndarray:
+               match_exposure: bool = False, zncc_min_std: float | None = None) -> np.ndarray:
     """``(h, w)`` float32 over ``box`` (default: the whole image): how badly the plane ``normal . x = offset``
     explains each pixel -- the ``rank``-th smallest (1-based) over the neighbours of the mean absolute sRGB
     difference (0..1) over a ``window`` box; each neighbour first brought to the view's exposure and white
-    balance (:func:`exposure_gains`) when ``match_exposure``.
+    balance (:func:`exposure_gains`) when ``match_exposure``. With ``zncc_min_std`` the cost is instead
+    :func:`zncc_cost` of the grey images (``inf`` on flat windows: no evidence).
 
     Only neighbours that see the plane's point count: it must land inside their image. With fewer such neighbours
     than ``rank`` the rank drops to their number; with fewer than ``min_views`` the cost is ``inf`` (no
@@ -51,6 +74,10 @@ def plane_cost(view: View, others: Sequence[View], normal: np.ndarray, offset: f
         return np.full((size[1], size[0]), np.inf, np.float32)
     shift = np.array([[1.0, 0.0, x0], [0.0, 1.0, y0], [0.0, 0.0, 1.0]])  # crop pixel -> image pixel
     img = np.ascontiguousarray(view.image[y0:y1, x0:x1])
+    zncc = zncc_min_std is not None
+    if zncc:
+        grey = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY).astype(np.float32)
+        stats = window_stats(grey, window)
     erode = np.ones((window, window), np.uint8)
     costs, count = [], np.zeros((size[1], size[0]), np.uint8)
     for other in others:
@@ -61,11 +88,16 @@ def plane_cost(view: View, others: Sequence[View], normal: np.ndarray, offset: f
         seen = cv2.warpPerspective(visible, H, size, flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
                                    borderMode=cv2.BORDER_CONSTANT, borderValue=0)
         seen = cv2.erode(seen, erode) > 0  # the whole window must be seen
-        if match_exposure:  # in 8 bits, saturating: what the brighter photo would have clipped
-            warped = cv2.multiply(warped, (*exposure_gains(img, warped, seen).tolist(), 0.0))
-        # |a - b| of 8-bit values is exact in 8 bits; the channel mean and the 0..1 scale in one transform
-        diff = cv2.transform(cv2.absdiff(warped, img).astype(np.float32), CHANNEL_MEAN)
-        costs.append(np.where(seen, cv2.blur(diff, (window, window)), np.float32(np.inf)))
+        if zncc:
+            diff = zncc_cost(grey, stats, cv2.cvtColor(warped, cv2.COLOR_RGB2GRAY).astype(np.float32), window,
+                             zncc_min_std)
+        else:
+            if match_exposure:  # in 8 bits, saturating: what the brighter photo would have clipped
+                warped = cv2.multiply(warped, (*exposure_gains(img, warped, seen).tolist(), 0.0))
+            # |a - b| of 8-bit values is exact in 8 bits; the channel mean and the 0..1 scale in one transform
+            diff = cv2.blur(cv2.transform(cv2.absdiff(warped, img).astype(np.float32), CHANNEL_MEAN),
+                            (window, window))
+        costs.append(np.where(seen, diff, np.float32(np.inf)))
         count += seen
     ranked = sorted_elementwise(costs)
     pick = np.clip(np.minimum(rank, count) - 1, 0, len(others) - 1)
@@ -93,14 +125,39 @@ def _tilted(normal: np.ndarray, ax: float, ay: float) -> np.ndarray:
     return n / np.linalg.norm(n)
 
 
-def find_support_plane(views: Sequence[View], nbrs: Sequence[Sequence[int]], opts: SegmentOptions,
-                       samples: int = 6, min_fraction: float = 0.08) -> Plane | None:
-    """The plane the object stands on, by photo-consistency (see the module doc), or None if no plane
-    perpendicular to the cameras' up within ~10 degrees explains at least ``min_fraction`` of the pixels
-    outside the unit sphere's image.
+def floor_measures(opts: SegmentOptions) -> tuple[str, ...]:
+    """The measures ``opts.floor_measure`` names: ``"sad"``, ``"zncc"`` or both (a pixel any of them explains)."""
+    return ("sad", "zncc") if opts.floor_measure == "both" else (opts.floor_measure,)
 
-    Searched: offsets along the up vector from 1.6 below the centre to just below it (coarse, then fine), then
-    tilts of up to ~8 degrees (the cameras' mean up is off by the photographer's average tilt)."""
+
+def floor_cost(view: View, others: Sequence[View], normal: np.ndarray, offset: float, opts: SegmentOptions,
+               measure: str) -> np.ndarray:
+    """:func:`plane_cost` by ``measure`` (``"sad"`` or ``"zncc"``), for the support plane and the floor."""
+    if measure == "zncc":
+        return plane_cost(view, others, normal, offset, opts.consistency_rank, window=opts.zncc_window,
+                          zncc_min_std=opts.zncc_min_std)
+    return plane_cost(view, others, normal, offset, opts.consistency_rank, match_exposure=opts.match_exposure)
+
+
+def floor_thresholds(opts: SegmentOptions, measure: str) -> tuple[float, float, float]:
+    """``(floor, margin, not_floor)`` thresholds on :func:`floor_cost` by ``measure``."""
+    if measure == "zncc":
+        return opts.zncc_floor_threshold, opts.zncc_floor_margin, opts.zncc_not_floor_threshold
+    return opts.floor_threshold, opts.floor_margin, opts.not_floor_threshold
+
+
+def find_support_plane(views: Sequence[View], nbrs: Sequence[Sequence[int]], opts: SegmentOptions,
+                       start: Plane | None = None, samples: int = 6, min_fraction: float = 0.08) -> Plane | None:
+    """The plane the object stands on, by photo-consistency (see the module doc), or None if no plane within
+    ~10 degrees of the cameras' up or of ``start`` explains at least ``min_fraction`` of the pixels outside the
+    unit sphere's image.
+
+    Searched: offsets along the up vector from 1.6 below the centre to just below it (coarse, then fine) and, with
+    ``start`` (the sparse points' plane), offsets near it along its normal; then from the better of the two, tilts
+    of up to ~8 degrees (the cameras' mean up is off by the photographer's average tilt; the sparse points' plane
+    is off by their noise). A real floor explains its pixels in a band of heights a few hundredths of a radius
+    wide, and the cameras' up can be 10 degrees from it (a walk-around with more photos from one side): the start
+    finds what a coarse search along the cameras' up misses."""
     up = camera_up(np.stack([v.c2w for v in views]))
     pick = np.unique(np.linspace(0, len(views) - 1, min(samples, len(views))).round().astype(int))
     regions = {int(i): sphere_distance(views[i]) >= 1.0 for i in pick}
@@ -108,27 +165,28 @@ def find_support_plane(views: Sequence[View], nbrs: Sequence[Sequence[int]], opt
     def score(normal: np.ndarray, offset: float) -> float:
         fractions = []
         for i in pick:
-            others = [views[j] for j in nbrs[i]]
-            cost = plane_cost(views[i], others, normal, offset, opts.consistency_rank,
-                              match_exposure=opts.match_exposure)
-            fractions.append(float((cost[regions[int(i)]] < opts.floor_threshold).mean()))
+            explained = np.zeros(views[i].shape, bool)
+            for m in floor_measures(opts):
+                cost = floor_cost(views[i], [views[j] for j in nbrs[i]], normal, offset, opts, m)
+                explained |= cost < floor_thresholds(opts, m)[0]
+            fractions.append(float(explained[regions[int(i)]].mean()))
         return float(np.mean(fractions))
 
-    offsets = np.arange(-1.6, -0.02, 0.04)
-    scores = [score(up, d) for d in offsets]
-    best_d = float(offsets[int(np.argmax(scores))])
-    for d in np.arange(best_d - 0.04, best_d + 0.0401, 0.01):
-        s = score(up, d)
-        if s > max(scores):
-            scores.append(s)
-            best_d = float(d)
-    best = (max(scores), up, best_d)
+    def best_offset(normal: np.ndarray, offsets: np.ndarray) -> tuple[float, np.ndarray, float]:
+        return max(((score(normal, float(d)), normal, float(d)) for d in offsets), key=lambda t: t[0])
+
+    coarse = best_offset(up, np.arange(-1.6, -0.02, 0.04))
+    best = max(coarse, best_offset(up, np.arange(coarse[2] - 0.03, coarse[2] + 0.031, 0.01)), key=lambda t: t[0])
+    if start is not None:
+        best = max(best, best_offset(start.normal, np.arange(start.offset - 0.04, start.offset + 0.0401, 0.01)),
+                   key=lambda t: t[0])
+    origin = best[1]
     step = np.radians(4.0)
     for _ in range(3):  # a small pattern search over the tilt, the offset re-fitted locally each time
         improved = False
         for ax, ay in ((step, 0), (-step, 0), (0, step), (0, -step)):
             n = _tilted(best[1], ax, ay)
-            if np.degrees(np.arccos(np.clip(n @ up, -1, 1))) > 10.0:
+            if np.degrees(np.arccos(np.clip(n @ origin, -1, 1))) > 10.0:
                 continue
             for d in (best[2] - 0.01, best[2], best[2] + 0.01):
                 s = score(n, d)
@@ -153,13 +211,17 @@ def floor_evidence(view: View, others: Sequence[View], plane: Plane, outside: np
     must explain it worse by ``floor_margin``. A flat patch matches under any homography -- a dark floating torus
     whose neighbours see more of the same torus where the plane puts its floor, a plain table -- and is no
     evidence either way. An opening drops isolated specks (chance matches on the object's flat patches)."""
-    cost = plane_cost(view, others, plane.normal, plane.offset, opts.consistency_rank,
-                      match_exposure=opts.match_exposure)
-    floor = (cost < opts.floor_threshold) & ~outside
-    if opts.floor_shift > 0:
-        for shift in (-opts.floor_shift, opts.floor_shift):
-            shifted = plane_cost(view, others, plane.normal, plane.offset + shift, opts.consistency_rank,
-                                 match_exposure=opts.match_exposure)
-            floor &= shifted >= cost + opts.floor_margin
-    floor = cv2.morphologyEx(floor.astype(np.uint8), cv2.MORPH_OPEN, disc(1)) > 0
-    return floor, (cost > opts.not_floor_threshold) & ~outside
+    floor, above = np.zeros(view.shape, bool), None
+    for m in floor_measures(opts):
+        threshold, margin, not_floor = floor_thresholds(opts, m)
+        cost = floor_cost(view, others, plane.normal, plane.offset, opts, m)
+        found = (cost < threshold) & ~outside
+        if opts.floor_shift > 0:
+            for shift in (-opts.floor_shift, opts.floor_shift):
+                found &= floor_cost(view, others, plane.normal, plane.offset + shift, opts, m) >= cost + margin
+        floor |= cv2.morphologyEx(found.astype(np.uint8), cv2.MORPH_OPEN, disc(1)) > 0
+        if above is None:  # the first measure's: with both, the colour difference's, as with it alone
+            # ZNCC's inf is a flat window, no evidence; the colour difference's (too few neighbours see the pixel)
+            # has always counted as off the plane
+            above = cost > not_floor if m == "sad" else (cost > not_floor) & np.isfinite(cost)
+    return floor, above & ~outside

@@ -64,6 +64,12 @@ class SegmentOptions:
     match_exposure: bool = False
     floor: bool = True
     not_floor_threshold: float = 0.12
+    floor_measure: str = "sad"
+    zncc_window: int = 7
+    zncc_min_std: float = 2.0
+    zncc_floor_threshold: float = 0.5
+    zncc_floor_margin: float = 0.3
+    zncc_not_floor_threshold: float = 0.8
     sweep: bool = True
     sweep_neighbours: int = 3
     sweep_rank: int = 2

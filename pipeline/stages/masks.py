@@ -87,7 +87,7 @@ from ..layout import (
 )
 from ..log import progress
 from ..masking.hull import carve, carve_votes, hull_grid, reproject
-from ..masking.prior import PriorSphere, find_prior_sphere, in_sphere_frame, touching_views
+from ..masking.prior import PriorSphere, find_prior_sphere, framed_options, in_sphere_frame, touching_views
 from ..masking.scale import full_size_mask, load_view, reduce
 from ..masking.segment import segment
 from ..masking.tracks import tracks_for_views
@@ -198,8 +198,8 @@ def run_masks(
             # the second, the evidence against the hull per view
             n = len(views)
             task = bar.add_task("segment", total=1 + 2 * n + opts.rounds * (1 + n) + (opts.rounds - 1) * n)
-            seg = segment(views, opts, fixed=fixed, on_step=lambda label: bar.advance(task),
-                          tracks=tracks.framed(prior.centre, prior.radius) if tracks is not None else None)
+            seg = segment(views, framed_options(opts, prior.radius), fixed=fixed,
+                          on_step=lambda label: bar.advance(task), tracks=tracks.framed(prior.centre, prior.radius) if tracks is not None else None)
             final, plane, rounds, labelled = seg.masks, seg.plane, seg.rounds, seg.track_labels
 
         # The hull of the final masks: the views' agreement and the object's bounding sphere.

@@ -17,6 +17,8 @@ from pipeline.masking.support_plane import (
     floor_evidence,
     plane_cost,
     sorted_elementwise,
+    window_stats,
+    zncc_cost,
 )
 from pipeline.masking.sweeps import column_image, column_in_hull, corner_strength, floor_through_hull, front_evidence
 from pipeline.masking.views import (
@@ -317,16 +319,35 @@ def test_the_floor_seen_through_a_too_large_hull_is_found_and_the_mirror_is_not(
         assert (found & ~balls[i] & hull).sum() > 0.5 * (~balls[i] & hull).sum()
 
 
-def floor_views(gains: np.ndarray) -> list[View]:
-    """:func:`close_ring` over the textured floor z = -0.9, each view's photo scaled by its own ``gains`` row
-    ``(N, 3)`` (exposure and white balance differing from photo to photo, as a camera's automatic ones do)."""
+def floor_views(gains: np.ndarray, normal: np.ndarray = FLOOR.normal) -> list[View]:
+    """:func:`close_ring` over a textured floor 0.9 below the centre (z = -0.9, or with its own ``normal``), each
+    view's photo scaled by its own ``gains`` row ``(N, 3)`` (exposure and white balance differing from photo to
+    photo, as a camera's automatic ones do)."""
     texture, views = cell_texture(7), close_ring(len(gains))
+    a = np.cross(normal, [1.0, 0.0, 0.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(normal, a)  # texture coordinates along the floor
     for view, gain in zip(views, gains):
         o, d = view.c2w[:3, 3], pixel_rays(view)
-        p = o + d * ((-0.9 - o[2]) / d[..., 2])[..., None]
-        colour = 10 + 0.3 * texture(8 * p[..., 0], 8 * p[..., 1])  # a carpet's contrast; none clips at gains < 2.5
+        p = o + d * ((-0.9 - o @ normal) / (d @ normal))[..., None]
+        colour = 10 + 0.3 * texture(8 * (p @ a), 8 * (p @ b))  # a carpet's contrast; none clips at gains < 2.5
         view.image = cv2.GaussianBlur(np.clip(colour * gain, 0, 255).astype(np.uint8), (0, 0), 0.7)
     return views
+
+
+def test_zncc_cost_is_blind_to_gain_and_offset_and_no_evidence_on_flat_windows():
+    rng = np.random.default_rng(1)
+    grey = cv2.GaussianBlur(rng.uniform(0, 255, (40, 50)).astype(np.float32), (0, 0), 1.0)
+    stats = window_stats(grey, 7)
+    inner = (slice(4, -4), slice(4, -4))  # away from the border's replicated windows
+    same = zncc_cost(grey, stats, 1.7 * grey + 20.0, 7, 2.0)
+    np.testing.assert_allclose(same[inner], 0.0, atol=1e-3)
+    np.testing.assert_allclose(zncc_cost(grey, stats, 255.0 - grey, 7, 2.0)[inner], 2.0, atol=1e-3)
+    other = cv2.GaussianBlur(rng.uniform(0, 255, (40, 50)).astype(np.float32), (0, 0), 1.0)
+    assert 0.6 < np.median(zncc_cost(grey, stats, other, 7, 2.0)[inner]) < 1.4  # unrelated: no correlation
+    flat = np.full_like(grey, 90.0)
+    assert np.isinf(zncc_cost(grey, stats, flat, 7, 2.0)).all()
+    assert np.isinf(zncc_cost(flat, window_stats(flat, 7), grey, 7, 2.0)).all()
 
 
 def test_exposure_gains_recover_a_neighbours_exposure_and_tint():
@@ -358,6 +379,28 @@ def test_the_floor_explains_photos_of_different_exposures_once_they_are_matched(
     assert find_support_plane(views, nbrs, SegmentOptions(match_exposure=False)) is None
     plane = find_support_plane(views, nbrs, SegmentOptions(match_exposure=True))
     assert plane is not None and abs(plane.offset + 0.9) < 0.03
+    plane = find_support_plane(views, nbrs, SegmentOptions(floor_measure="zncc"))  # blind to exposure as it is
+    assert plane is not None and abs(plane.offset + 0.9) < 0.03
+
+
+def test_the_support_plane_search_starts_from_the_sparse_points_plane_where_the_cameras_up_is_far_off():
+    """A floor tilted 14 degrees from the cameras' up (a walk-around with more photos from one side): the search
+    along the up and its tilts of up to ~10 degrees misses it (finds none, or a wrong one that explains a band of
+    the floor); started from a plane near it (the sparse points'), it finds the floor's height and tilt."""
+    tilt = np.radians(14.0)
+    normal = np.array([np.sin(tilt), 0.0, np.cos(tilt)])
+    views = floor_views(np.ones((12, 3)), normal)
+    nbrs = neighbours(views, 6, 60.0)
+    opts = SegmentOptions(floor_measure="zncc")
+
+    def off_deg(plane: Plane) -> float:
+        return float(np.degrees(np.arccos(np.clip(plane.normal @ normal, -1, 1))))
+
+    missed = find_support_plane(views, nbrs, opts)
+    assert missed is None or off_deg(missed) > 4.0
+    plane = find_support_plane(views, nbrs, opts, start=Plane(normal, -0.92, 1.0))
+    assert plane is not None and abs(plane.offset + 0.9) < 0.015 and off_deg(plane) < 2.0
+    assert plane.consistent_fraction > 0.5
 
 
 def ball_silhouette(view: View, centre: np.ndarray, radius: float) -> np.ndarray:
