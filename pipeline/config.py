@@ -256,8 +256,8 @@ class MasksConfig(StrictModel):
     carve_votes: int = Field(3, ge=1, description="...and at least this many views (1: the classic visual hull)")
     seed_radius: float = Field(
         0.3, ge=0, lt=1, description="before any hull, the central part of the unit sphere's image (this fraction of "
-        "its radius) is taken as object: the cameras converge on it (of the first sphere's radius when the sphere prior "
-        "grows)"
+        "its radius) is taken as object: the cameras converge on it (of the first sphere's radius when the "
+        "sphere prior grows)"
     )
     doubtful_vote: float = Field(
         0.5, ge=0, le=1, description="a background vote counts this much where the view's pixel is dark (see "

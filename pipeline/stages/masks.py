@@ -198,8 +198,9 @@ def run_masks(
             # the second, the evidence against the hull per view
             n = len(views)
             task = bar.add_task("segment", total=1 + 2 * n + opts.rounds * (1 + n) + (opts.rounds - 1) * n)
+            framed_tracks = tracks.framed(prior.centre, prior.radius) if tracks is not None else None
             seg = segment(views, framed_options(opts, prior.radius), fixed=fixed,
-                          on_step=lambda label: bar.advance(task), tracks=tracks.framed(prior.centre, prior.radius) if tracks is not None else None)
+                          on_step=lambda label: bar.advance(task), tracks=framed_tracks)
             final, plane, rounds, labelled = seg.masks, seg.plane, seg.rounds, seg.track_labels
 
         # The hull of the final masks: the views' agreement and the object's bounding sphere.
