@@ -16,7 +16,9 @@ each timed with its peak resident memory, then scores:
   (:func:`pipeline.alignment.compare_poses`), rotation errors (the similarity's rotation from the cameras'
   orientations) and centre errors (the similarity from the centres) as a fraction of the reference cameras'
   mean distance from their centroid. The reference is another SfM run: agreement, not truth.
-- masks: IoU of every view's mask with the reference mask resized to it (area average, then half way).
+- masks: IoU of every view's mask with the reference mask resized to it (area average, then half way) and, when
+  the poses stage undistorted the photos (the masks are then in the undistorted images' grid), resampled the
+  way the photos were.
 
 Prints a table and appends a JSON line (machine, commit, settings, figures) to bench/results/blowtorch.jsonl.
 The scoring functions are shared with tests/stages/test_blowtorch.py.
@@ -52,12 +54,14 @@ from pipeline.layout import (
     PHOTO_SUBDIR,
     POSES,
     POSES_BOUNDS,
+    UNDISTORTED,
     USER_MASKS,
 )
 from pipeline.llff import load_poses_bounds
 from pipeline.mask_file import read_mask
 from pipeline.metrics import iou
-from pipeline.results import load_masks, load_poses
+from pipeline.results import load_decode, load_masks, load_poses
+from pipeline.undistort import UndistortMaps, recorded_undistortion, remap
 
 ROOT = Path(__file__).resolve().parents[1]
 DATASET = ROOT.parent / "shared" / "testdata" / "real" / "blowtorch"
@@ -172,18 +176,23 @@ def pose_agreement(cameras: CameraSet, reference: CameraSet) -> dict[str, Any]:
     }
 
 
-def reference_mask(path: Path, size: tuple[int, int]) -> np.ndarray:
+def reference_mask(path: Path, size: tuple[int, int], undistortion: UndistortMaps | None = None) -> np.ndarray:
     """``(H, W)`` bool reference mask at ``size`` (width, height): thresholded at the file's own size, then
-    area-averaged and taken where at least half object (the rule of every figure in bench/results; the
-    pipeline's reader, :func:`pipeline.mask_file.read_mask`, counts a pixel exactly half covered as background,
-    which moves the blowtorch's IoU by about 0.002)."""
+    area-averaged, resampled (bilinear) like its photo when ``undistortion`` (the poses stage's) is given, and
+    taken where at least half object (the rule of every figure in bench/results; the pipeline's reader,
+    :func:`pipeline.mask_file.read_mask`, counts a pixel exactly half covered as background, which moves the
+    blowtorch's IoU by about 0.002)."""
     full = read_mask(path, Image.open(path).size)
-    return cv2.resize(full.astype(np.float32), size, interpolation=cv2.INTER_AREA) >= HALF
+    small = cv2.resize(full.astype(np.float32), size, interpolation=cv2.INTER_AREA)
+    if undistortion is not None:
+        small = remap(small, undistortion.maps[undistortion.lens_of[path.stem]])
+    return small >= HALF
 
 
-def masks_agreement(masks_dir: Path, reference: Path = DATASET / USER_MASKS) -> dict[str, Any]:
+def masks_agreement(masks_dir: Path, reference: Path = DATASET / USER_MASKS,
+                    undistortion: UndistortMaps | None = None) -> dict[str, Any]:
     """IoU of each mask of a masks stage folder with the ``reference`` mask of its photo (``<name>.png``,
-    :func:`reference_mask` at our size).
+    :func:`reference_mask` at our size, through ``undistortion``: the poses stage's, when it made one).
 
     Returns:
         ``iou_median``, ``iou_mean``, ``iou_worst``, ``worst_view``, ``views`` and ``per_view``.
@@ -192,7 +201,7 @@ def masks_agreement(masks_dir: Path, reference: Path = DATASET / USER_MASKS) -> 
     scores = {}
     for name in masks.names:
         ours = masks.mask(name)
-        scores[name] = iou(ours, reference_mask(reference / f"{name}.png", ours.shape[::-1]))
+        scores[name] = iou(ours, reference_mask(reference / f"{name}.png", ours.shape[::-1], undistortion))
     values = np.array(list(scores.values()))
     worst = min(scores, key=scores.get)
     return {"views": len(scores), "iou_median": float(np.median(values)), "iou_mean": float(values.mean()),
@@ -220,6 +229,12 @@ def commit() -> str:
                                                   else "")
 
 
+def poses_undistortion(results: Path) -> UndistortMaps | None:
+    """How the poses stage in ``results/`` resampled the photos (its ``undistorted/`` folder), or None."""
+    undistorted = results / POSES / UNDISTORTED
+    return recorded_undistortion(load_decode(undistorted)) if undistorted.is_dir() else None
+
+
 def score(results: Path, photos: Sequence[Path], dataset: Path = DATASET) -> dict[str, Any]:
     """Registered photos, pose agreement and masks IoU of a front-end run in ``results/``."""
     cameras = load_poses(results / POSES).cameras()
@@ -229,7 +244,7 @@ def score(results: Path, photos: Sequence[Path], dataset: Path = DATASET) -> dic
                                "unregistered": [n for n in names if n not in registered],
                                "poses": pose_agreement(cameras, reference_cameras(dataset))}
     if (results / MASKS).is_dir():
-        figures["masks"] = masks_agreement(results / MASKS, dataset / USER_MASKS)
+        figures["masks"] = masks_agreement(results / MASKS, dataset / USER_MASKS, poses_undistortion(results))
     return figures
 
 

@@ -46,6 +46,7 @@ from bench.blowtorch import (  # noqa: E402
     machine,
     masks_agreement,
     pose_agreement,
+    poses_undistortion,
     run_front_end,
 )
 from pipeline.cameras import CameraSet, load_cameras  # noqa: E402
@@ -127,7 +128,8 @@ def run_scene(seed: int, cache: Path, work: Path, overrides: list[str], plain: b
         record["unregistered"] = sorted(set(names) - set(ours.by_name()))
         record["poses"] = score_poses(ours, truth)
     if runs.get(MASKS) is not None and not runs[MASKS].returncode:
-        record["masks"] = masks_agreement(results / MASKS, capture / GROUND_TRUTH / MASKS)
+        record["masks"] = masks_agreement(results / MASKS, capture / GROUND_TRUTH / MASKS,
+                                          poses_undistortion(results))
     if plain and not known_poses and (results / DECODE / SRGB).is_dir():
         started = time.perf_counter()
         c2w = plain_pycolmap(results / DECODE / SRGB, results / "plain_pycolmap")
