@@ -94,15 +94,26 @@ def plane_cost(view: View, others: Sequence[View], normal: np.ndarray, offset: f
         else:
             if match_exposure:  # in 8 bits, saturating: what the brighter photo would have clipped
                 warped = cv2.multiply(warped, (*exposure_gains(img, warped, seen).tolist(), 0.0))
-            # |a - b| of 8-bit values is exact in 8 bits; the channel mean and the 0..1 scale in one transform
-            diff = cv2.blur(cv2.transform(cv2.absdiff(warped, img).astype(np.float32), CHANNEL_MEAN),
-                            (window, window))
+            diff = window_difference(img, warped, window)
         costs.append(np.where(seen, diff, np.float32(np.inf)))
         count += seen
-    ranked = sorted_elementwise(costs)
-    pick = np.clip(np.minimum(rank, count) - 1, 0, len(others) - 1)
-    out = np.choose(pick, ranked)
+    return ranked_cost(costs, count, rank, min_views)
+
+
+def ranked_cost(costs: Sequence[np.ndarray], count: np.ndarray, rank: int, min_views: int) -> np.ndarray:
+    """``(h, w)`` float32: each pixel's ``rank``-th smallest (1-based) of ``costs`` (one ``(h, w)`` per neighbour,
+    ``inf`` where that neighbour does not see the pixel), the rank dropping to ``count`` (``(h, w)``: neighbours
+    that see it) where fewer see it; ``inf`` where fewer than ``min(min_views, rank)`` do (no evidence)."""
+    pick = np.clip(np.minimum(rank, count) - 1, 0, len(costs) - 1)
+    out = np.choose(pick, sorted_elementwise(costs))
     return np.where(count >= min(min_views, rank), out, np.inf).astype(np.float32)
+
+
+def window_difference(image: np.ndarray, warped: np.ndarray, window: int) -> np.ndarray:
+    """``(h, w)`` float32: the mean absolute difference of two ``(h, w, 3)`` uint8 sRGB images over the channels and
+    a ``window`` box, 0..1."""
+    # |a - b| of 8-bit values is exact in 8 bits; the channel mean and the 0..1 scale in one transform
+    return cv2.blur(cv2.transform(cv2.absdiff(warped, image).astype(np.float32), CHANNEL_MEAN), (window, window))
 
 
 def sorted_elementwise(arrays: Sequence[np.ndarray]) -> list[np.ndarray]:

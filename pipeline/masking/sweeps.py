@@ -11,7 +11,7 @@ import numpy as np
 
 from ..object_frame import pixels_of
 from .hull import in_hull
-from .support_plane import plane_cost
+from .support_plane import plane_cost, ranked_cost, window_difference
 from .views import Plane, SegmentOptions, View, disc, pixel_rays, sphere_box
 
 
@@ -123,6 +123,51 @@ def front_cost(view: View, others: Sequence[View], plane: Plane, entry: np.ndarr
     return best, best_height
 
 
+def depth_cost(view: View, others: Sequence[View], depth: np.ndarray, box: tuple[int, int, int, int], rank: int,
+               window: int = 5, min_views: int = 2) -> np.ndarray:
+    """``(h, w)`` float32 over ``box``: how badly the points at distance ``depth`` (``(h, w)`` along each pixel's
+    ray; ``inf``: none) explain each pixel -- as :func:`~.support_plane.plane_cost`, with a depth per pixel
+    instead of a plane: each neighbour sampled where it sees the point (bilinear), the mean absolute sRGB
+    difference over a ``window`` box, the ``rank``-th smallest over the neighbours that see the whole window;
+    ``inf`` where no depth is given or fewer than ``min_views`` see it."""
+    x0, y0, x1, y1 = box
+    h, w = y1 - y0, x1 - x0
+    img = np.ascontiguousarray(view.image[y0:y1, x0:x1])
+    given = np.isfinite(depth)
+    points = view.c2w[:3, 3] + pixel_rays(view, box) * np.where(given, depth, 0.0)[..., None]
+    erode = np.ones((window, window), np.uint8)
+    costs, count = [], np.zeros((h, w), np.uint8)
+    for other in others:
+        w2c = np.linalg.inv(other.c2w)
+        cam = points @ w2c[:3, :3].T + w2c[:3, 3]
+        z = np.where(given & (cam[..., 2] > 1e-6), cam[..., 2], np.nan)
+        # project: pixel centres at +0.5 (pixel_rays), cv2.remap's at integers
+        mx = (other.K[0, 0] * cam[..., 0] / z + other.K[0, 2] - 0.5).astype(np.float32)
+        my = (other.K[1, 1] * cam[..., 1] / z + other.K[1, 2] - 0.5).astype(np.float32)
+        oh, ow = other.shape
+        inside = np.isfinite(mx) & np.isfinite(my) & (mx >= 0) & (my >= 0) & (mx <= ow - 1) & (my <= oh - 1)
+        mx, my = np.where(inside, mx, -1.0).astype(np.float32), np.where(inside, my, -1.0).astype(np.float32)
+        warped = cv2.remap(other.image, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        seen = cv2.erode(inside.astype(np.uint8), erode) > 0  # the whole window must be seen
+        costs.append(np.where(seen, window_difference(img, warped, window), np.float32(np.inf)))
+        count += seen
+    if not costs:
+        return np.full((h, w), np.inf, np.float32)
+    return ranked_cost(costs, count, rank, min_views)
+
+
+def surface_cost(view: View, others: Sequence[View], entry: np.ndarray, box: tuple[int, int, int, int], rank: int,
+                 depth: float, step: float) -> np.ndarray:
+    """``(h, w)`` float32 over ``box``: how well the object's own surface explains each pixel -- the best
+    :func:`depth_cost` from where the ray enters the hull (``entry``, ``(h, w)``; ``inf``: it misses) to ``depth``
+    behind it, ``step`` apart (the hull overhangs the object: its surface lies at or behind the entry). ``inf``
+    off the hull or where too few neighbours see it."""
+    best = np.full(entry.shape, np.inf, np.float32)
+    for behind in np.arange(0.0, depth + 1e-9, step):
+        np.minimum(best, depth_cost(view, others, entry + behind, box, rank), out=best)
+    return best
+
+
 def _inner(hull: np.ndarray, opts: SegmentOptions) -> np.ndarray:
     """Well inside the hull's image: at its outline a window mixes the object with what is behind it."""
     return cv2.erode(hull.astype(np.uint8), disc(opts.front_inset_px)) > 0
@@ -144,7 +189,10 @@ def front_evidence(view: View, others: Sequence[View], plane: Plane, depth: np.n
     the sphere cannot see and the hull, knowing nothing of occlusion, covers.
 
     Its top: textured, unclipped pixels of the sphere's image that a plane parallel to the support plane explains
-    between the camera and the hull (:func:`front_cost`; ``depth``: :func:`hull_depth`), in blobs, whose column
+    between the camera and the hull (:func:`front_cost`; ``depth``: :func:`hull_depth`) clearly better than the
+    object's own surface behind it does (:func:`surface_cost`, by ``front_surface_margin``: on a plain, noisy
+    object -- a grey mug in shadow -- the best of a hundred planes in front matches the noise by chance about as
+    well as the surface, a real prop's top far better than the object hidden behind it), in blobs, whose column
     down to the support plane stays out of the hull ``volume < max_votes`` (:func:`column_in_hull`): a prop stands
     on the floor beside the object, while a chance match on the object's own texture floats in front of it with
     the object under it. Its sides: the image of those columns in front of the hull
@@ -156,6 +204,9 @@ def front_evidence(view: View, others: Sequence[View], plane: Plane, depth: np.n
     entry = np.where(_inner(np.isfinite(depth), opts), depth, -np.inf)[y0:y1, x0:x1]
     cost, heights = front_cost(view, others, plane, entry, box, opts.sweep_rank, opts.front_step, opts.front_margin,
                                opts.match_exposure)
+    surface = surface_cost(view, others, np.where(np.isfinite(entry), entry, np.inf), box, opts.sweep_rank,
+                           opts.front_surface_depth, opts.front_surface_step)
+    cost = np.where(cost + opts.front_surface_margin < surface, cost, np.inf)
     tops = _blobs_of_corners(view, _matched(view, cost, box, opts.sweep_threshold, opts), opts.front_min_px, opts)
     ys, xs = np.nonzero(tops[y0:y1, x0:x1])
     if len(ys) == 0:

@@ -89,6 +89,9 @@ class SegmentOptions:
     front_min_px: int = 40
     front_corner: float = 1.0e-4
     front_column_share: float = 0.25
+    front_surface_depth: float = 0.1
+    front_surface_step: float = 0.02
+    front_surface_margin: float = 0.02
     through_floor: bool = True
     through_threshold: float = 0.04
     through_min_px: int = 16

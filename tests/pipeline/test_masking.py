@@ -20,7 +20,15 @@ from pipeline.masking.support_plane import (
     window_stats,
     zncc_cost,
 )
-from pipeline.masking.sweeps import column_image, column_in_hull, corner_strength, floor_through_hull, front_evidence
+from pipeline.masking.sweeps import (
+    column_image,
+    column_in_hull,
+    corner_strength,
+    depth_cost,
+    floor_through_hull,
+    front_evidence,
+    surface_cost,
+)
 from pipeline.masking.views import (
     Plane,
     SegmentOptions,
@@ -269,6 +277,32 @@ def test_a_prop_in_front_of_the_hull_is_found_and_the_mirror_ball_is_not():
         else:
             assert covered.sum() == 0
             assert found.sum() == 0
+
+
+def test_the_objects_own_surface_explains_its_pixels_at_its_depth_and_from_behind_the_hulls_entry():
+    """A ball painted with a texture fixed on its surface, seen by a close ring: at its true depth the neighbours
+    see the same paint (what is left: foreshortening and the lens blur), 0.1 in front of it they do not; searched
+    from an entry 0.05 in front of the surface (a hull's overhang) to 0.1 behind that, the surface is found again.
+    Off the ball there is no depth: no evidence."""
+    texture = cell_texture(5)
+    views = close_ring()
+    for view in views:
+        ball, _, hit, _ = mirror_ball(view, 0.4)
+        image = np.full(view.image.shape, 128, np.uint8)
+        image[ball] = texture(12 * hit[..., 0] + 20, 12 * hit[..., 1] + 12 * hit[..., 2] + 20)[ball]
+        view.image = cv2.GaussianBlur(image, (0, 0), 0.7)
+    near = neighbours(views, 3, 60.0)
+    i = 0
+    ball, t, _, _ = mirror_ball(views[i], 0.4)
+    box = (0, 0, views[i].shape[1], views[i].shape[0])
+    inner = cv2.erode(ball.astype(np.uint8), np.ones((9, 9), np.uint8)) > 0  # windows all on the ball
+    others = [views[j] for j in near[i]]
+    at_surface = depth_cost(views[i], others, t, box, 2)
+    in_front = depth_cost(views[i], others, t - 0.1, box, 2)
+    assert np.median(at_surface[inner]) < 0.04 and np.median(in_front[inner]) > 3 * np.median(at_surface[inner])
+    assert np.isinf(at_surface[~ball]).all()
+    found = surface_cost(views[i], others, t - 0.05, box, 2, 0.1, 0.01)
+    assert np.median(found[inner]) <= np.median(at_surface[inner]) + 1e-3
 
 
 def test_a_column_through_the_hull_is_measured_and_one_beside_it_is_not():
