@@ -15,6 +15,12 @@ from .views import Plane, SegmentOptions, View, disc, plane_homography, sphere_d
 log = logging.getLogger("orca.masks")
 
 CHANNEL_MEAN = np.full((1, 3), 1.0 / (3 * 255), np.float32)  # 8-bit RGB difference -> mean over channels, 0..1
+# The support plane's search, in radii of the unit sphere: heights along the cameras' up from DEEPEST to SHALLOWEST
+# below the centre COARSE apart, then FINE apart within one coarse step of the best; around the sparse points'
+# plane, START_SPAN either side FINE apart (a floor is photo-consistent in a band a few hundredths wide); tilts by
+# a pattern search from TILT_STEP_DEG, at most MAX_TILT_DEG from where it started.
+DEEPEST, SHALLOWEST, COARSE, FINE, START_SPAN = -1.6, -0.02, 0.04, 0.01, 0.04
+TILT_STEP_DEG, MAX_TILT_DEG, TILT_ROUNDS = 4.0, 10.0, 3
 
 
 def exposure_gains(image: np.ndarray, warped: np.ndarray, seen: np.ndarray, min_pixels: int = 200,
@@ -186,20 +192,22 @@ def find_support_plane(views: Sequence[View], nbrs: Sequence[Sequence[int]], opt
     def best_offset(normal: np.ndarray, offsets: np.ndarray) -> tuple[float, np.ndarray, float]:
         return max(((score(normal, float(d)), normal, float(d)) for d in offsets), key=lambda t: t[0])
 
-    coarse = best_offset(up, np.arange(-1.6, -0.02, 0.04))
-    best = max(coarse, best_offset(up, np.arange(coarse[2] - 0.03, coarse[2] + 0.031, 0.01)), key=lambda t: t[0])
+    def around(offset: float, span: float) -> np.ndarray:
+        return np.arange(offset - span, offset + span + FINE / 2, FINE)
+
+    coarse = best_offset(up, np.arange(DEEPEST, SHALLOWEST, COARSE))
+    best = max(coarse, best_offset(up, around(coarse[2], COARSE - FINE)), key=lambda t: t[0])
     if start is not None:
-        best = max(best, best_offset(start.normal, np.arange(start.offset - 0.04, start.offset + 0.0401, 0.01)),
-                   key=lambda t: t[0])
+        best = max(best, best_offset(start.normal, around(start.offset, START_SPAN)), key=lambda t: t[0])
     origin = best[1]
-    step = np.radians(4.0)
-    for _ in range(3):  # a small pattern search over the tilt, the offset re-fitted locally each time
+    step = np.radians(TILT_STEP_DEG)
+    for _ in range(TILT_ROUNDS):  # a small pattern search over the tilt, the offset re-fitted locally each time
         improved = False
         for ax, ay in ((step, 0), (-step, 0), (0, step), (0, -step)):
             n = _tilted(best[1], ax, ay)
-            if np.degrees(np.arccos(np.clip(n @ origin, -1, 1))) > 10.0:
+            if np.degrees(np.arccos(np.clip(n @ origin, -1, 1))) > MAX_TILT_DEG:
                 continue
-            for d in (best[2] - 0.01, best[2], best[2] + 0.01):
+            for d in (best[2] - FINE, best[2], best[2] + FINE):
                 s = score(n, d)
                 if s > best[0] + 1e-4:
                     best, improved = (s, n, d), True
