@@ -9,7 +9,7 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from ..object_frame import pixels_of
+from ..object_frame import pixels_of, project
 from .hull import in_hull
 from .support_plane import plane_cost, ranked_cost, window_difference
 from .views import Plane, SegmentOptions, View, disc, pixel_rays, sphere_box
@@ -138,14 +138,11 @@ def depth_cost(view: View, others: Sequence[View], depth: np.ndarray, box: tuple
     erode = np.ones((window, window), np.uint8)
     costs, count = [], np.zeros((h, w), np.uint8)
     for other in others:
-        w2c = np.linalg.inv(other.c2w)
-        cam = points @ w2c[:3, :3].T + w2c[:3, 3]
-        z = np.where(given & (cam[..., 2] > 1e-6), cam[..., 2], np.nan)
-        # project: pixel centres at +0.5 (pixel_rays), cv2.remap's at integers
-        mx = (other.K[0, 0] * cam[..., 0] / z + other.K[0, 2] - 0.5).astype(np.float32)
-        my = (other.K[1, 1] * cam[..., 1] / z + other.K[1, 2] - 0.5).astype(np.float32)
+        uv, z = project(points.reshape(-1, 3), other.c2w[None], other.K[None])
+        # pixel centres at +0.5 (pixel_rays), cv2.remap's at integers
+        mx, my = (uv[0, :, k].reshape(h, w) - 0.5 for k in (0, 1))
         oh, ow = other.shape
-        inside = np.isfinite(mx) & np.isfinite(my) & (mx >= 0) & (my >= 0) & (mx <= ow - 1) & (my <= oh - 1)
+        inside = given & (z[0].reshape(h, w) > 1e-6) & (mx >= 0) & (my >= 0) & (mx <= ow - 1) & (my <= oh - 1)
         mx, my = np.where(inside, mx, -1.0).astype(np.float32), np.where(inside, my, -1.0).astype(np.float32)
         warped = cv2.remap(other.image, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
         seen = cv2.erode(inside.astype(np.uint8), erode) > 0  # the whole window must be seen
