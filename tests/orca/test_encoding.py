@@ -2,11 +2,18 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import torch
 
-from orca.encoding import HashGrid, HashGridSpec, integrated_positional_encoding, positional_encoding
+from orca.encoding import (
+    HashGrid,
+    HashGridSpec,
+    corner_indices,
+    integrated_positional_encoding,
+    positional_encoding,
+)
 
 
 def test_positional_encoding_values_and_shape():
@@ -82,3 +89,26 @@ def test_hash_grid_footprint_downweights_fine_levels_only():
     ratio = (wide.norm(dim=(0, 2)) / plain.norm(dim=(0, 2)))
     assert ratio[0] > 0.9 and ratio[-1] < 0.1, ratio  # 4-voxel level kept, 256-voxel level suppressed
     assert (ratio[1:] <= ratio[:-1] + 1e-6).all()
+
+
+def test_corner_indices_are_instant_ngps_rows():
+    # the reference: each corner's row computed on its own, in int64, as Instant-NGP writes it
+    grid = HashGrid(HashGridSpec(levels=6, log2_table_size=10, base_resolution=4, max_resolution=200))
+    assert 0 < grid.n_dense < 6  # both kinds of level
+    x = torch.rand(300, 3)
+    x[:5] = torch.tensor([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [1.0, 0.0, 0.5], [0.999999, 1e-7, 1.0], [0.5, 0.5, 0.5]])
+    res = torch.tensor(grid.resolutions)
+    base = (x[:, None, :] * res[:, None]).floor().long().minimum(res[:, None] - 1)
+    rows = corner_indices(base, res, torch.tensor(grid.offsets[1:]) - torch.tensor(grid.offsets[:-1]),
+                          torch.tensor(grid.offsets[:-1]), grid.n_dense)
+    assert rows.dtype == torch.int32 and rows.shape == (300, 6, 8)
+    for level, r in enumerate(grid.resolutions):
+        start, size = grid.offsets[level], grid.offsets[level + 1] - grid.offsets[level]
+        for corner, (i, j, k) in enumerate(itertools.product((0, 1), repeat=3)):
+            c = base[:, level] + torch.tensor([i, j, k])
+            if grid.dense[level]:
+                expected = (c[:, 0] * (r + 1) + c[:, 1]) * (r + 1) + c[:, 2]
+            else:
+                expected = (c[:, 0] ^ (c[:, 1] * 2654435761) ^ (c[:, 2] * 805459861)) % size
+            assert torch.equal(rows[:, level, corner].long(), expected + start), (level, corner)
+    assert rows.min() >= 0 and rows.max() < grid.table.shape[0]
