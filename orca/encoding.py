@@ -107,7 +107,7 @@ def corner_indices(
         hz = ((c[:, :, 2] * p2) & mask).int()
         rows = hx[..., :, None, None] ^ hy[..., None, :, None] ^ hz[..., None, None, :]
         parts.append(rows + starts[nd:, None, None, None].int())
-    return torch.cat([p.reshape(n, -1, 8) for p in parts], dim=1)
+    return torch.cat([p.reshape(n, p.shape[1], 8) for p in parts], dim=1)
 
 
 def _as_pairs(t: torch.Tensor) -> torch.Tensor:

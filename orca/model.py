@@ -90,9 +90,10 @@ class OrcaModel(nn.Module):
         self.log_beta.clamp_(max=math.log(max(cap - s.beta_min, 1e-12)))
 
     def forward(
-        self, origins: torch.Tensor, dirs: torch.Tensor, radii: torch.Tensor, specular: bool = True
+        self, origins: torch.Tensor, dirs: torch.Tensor, radii: torch.Tensor, specular: bool | torch.Tensor = True
     ) -> RayOutputs:
-        """Object rays ``(N, 3), (N, 3), (N,)`` -> :class:`RayOutputs` (``specular=False``: no virtual cones)."""
+        """Object rays ``(N, 3), (N, 3), (N,)`` -> :class:`RayOutputs` (``specular``: every ray's virtual cones,
+        none, or those of the rays a ``(N,)`` bool tensor marks; see :func:`~orca.render.render_rays`)."""
         return render_rays(
             self.sdf_field, self.env_field, self.beta, origins, dirs, radii, self.spec.render, specular
         )
@@ -177,10 +178,11 @@ def objective(
     Returns:
         total loss, the unweighted terms (detached, for logging), and the render.
     """
-    # the warm-up uses geometry alone: the virtual cones (the environment along each) would be wasted
-    out = model(batch.origins, batch.dirs, batch.radii, specular=phase == "joint")
-    gains = model.photo_gains() if batch.photo is not None else None
     obj = batch.mask > 0.5
+    # Virtual cones (the environment along each) only where the photometric term reads the colour: object
+    # pixels, after the warm-up, which uses geometry alone.
+    out = model(batch.origins, batch.dirs, batch.radii, specular=obj if phase == "joint" else False)
+    gains = model.photo_gains() if batch.photo is not None else None
     terms: dict[str, torch.Tensor] = {
         "mask": mask_loss(out.opacity, batch.mask),
         "eikonal": eikonal_loss(out.sdf_grad),
@@ -196,7 +198,8 @@ def objective(
             surface_rgb, batch.rgb, obj & batch.valid, obj & ~batch.valid, weights.clipped_excess
         )
         terms["orientation"] = normal_orientation_loss(out.weights, normals, batch.dirs)
-        terms["distortion"] = cone_distortion_loss(out.env_weights, out.env_s)
+        if obj.any():
+            terms["distortion"] = cone_distortion_loss(out.env_weights, out.env_s)
         if weights.smoothness > 0:
             terms["smoothness"] = smoothness_term(model, batch, out, weights.smoothness_step)
     if weights.free_space > 0 and obj.any():

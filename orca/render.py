@@ -73,8 +73,8 @@ class RayOutputs(NamedTuple):
     sdf_grad: torch.Tensor  # (N, S, 3) SDF gradients at the samples (eikonal loss)
     weights: torch.Tensor  # (N, S)
     t: torch.Tensor  # (N, S + 1) interval edges
-    env_weights: torch.Tensor  # (N, K, E) weights along the virtual cones (distortion loss)
-    env_s: torch.Tensor  # (N, K, E + 1) cone interval edges, normalized to [0, 1] (log distance)
+    env_weights: torch.Tensor  # (M, K, E) weights along the shaded rays' virtual cones (distortion loss)
+    env_s: torch.Tensor  # (M, K, E + 1) cone interval edges, normalized to [0, 1] (log distance)
 
 
 def fresnel_dielectric(cos_theta: torch.Tensor, ior: float) -> torch.Tensor:
@@ -282,7 +282,7 @@ def render_rays(
     dirs: torch.Tensor,
     radii: torch.Tensor,
     spec: RenderSpec = RenderSpec(),
-    specular: bool = True,
+    specular: bool | torch.Tensor = True,
 ) -> RayOutputs:
     """Render primary rays through the object.
 
@@ -291,7 +291,10 @@ def render_rays(
         origins: ``(N, 3)`` camera centres; dirs: ``(N, 3)`` unit directions; radii: ``(N,)`` pixel-cone
             radius growth (mip-NeRF ``radii``).
         specular: False skips the virtual cones (specular zero, no cone weights): geometry alone, as the
-            mask-only warm-up needs, at a fraction of the cost.
+            mask-only warm-up needs, at a fraction of the cost. A ``(N,)`` bool tensor casts cones for those
+            rays only (training: the pixels whose colour a loss reads); the others' specular is zero.
+    Returns:
+        :class:`RayOutputs`; its cone weights and edges are the shaded rays' only, ``(M, K, E)``.
     """
     n = origins.shape[0]
     near, far, _ = ray_sphere_bounds(origins, dirs, spec.object_radius)
@@ -324,18 +327,29 @@ def render_rays(
     normal_map = (w[..., None] * normals).sum(-2)
     depth = (w * mid).sum(-1)
 
-    if specular:
+    shade = None  # the rays that cast cones; None: every ray
+    cast = specular
+    if isinstance(specular, torch.Tensor):
+        shade = specular.nonzero().squeeze(-1)
+        cast = shade.numel() > 0
+        if shade.numel() == n:
+            shade = None
+    if cast:
         # Virtual cones at the highest-weight samples only.
+        pick = (lambda t: t) if shade is None else (lambda t: t[shade])  # noqa: E731
+        m = n if shade is None else shade.numel()
         k = min(spec.cone_samples, s_count)
-        top = torch.topk(w.detach(), k, dim=-1).indices  # (N, K)
-        w_k = w.gather(1, top)  # (N, K) differentiable
-        p_k = x.gather(1, top[..., None].expand(n, k, 3))
-        n_k = normals.gather(1, top[..., None].expand(n, k, 3))
+        w_m, x_m, normals_m = pick(w), pick(x), pick(normals)
+        top = torch.topk(w_m.detach(), k, dim=-1).indices  # (M, K)
+        w_k = w_m.gather(1, top)  # (M, K) differentiable
+        p_k = x_m.gather(1, top[..., None].expand(m, k, 3))
+        n_k = normals_m.gather(1, top[..., None].expand(m, k, 3))
         _, curv = normals_and_curvature_fd(sdf_field.sdf, p_k.reshape(-1, 3), spec.curvature_eps)
-        share = w_k / w_k.sum(-1, keepdim=True).clamp_min(1e-8) * opacity[:, None]  # (N, K)
-        specular_rgb, env_w, env_s = shade_specular(
-            env_field, origins, dirs, radii, p_k, n_k, curv.reshape(n, k), share, spec
+        share = w_k / w_k.sum(-1, keepdim=True).clamp_min(1e-8) * pick(opacity)[:, None]  # (M, K)
+        shaded, env_w, env_s = shade_specular(
+            env_field, pick(origins), pick(dirs), pick(radii), p_k, n_k, curv.reshape(m, k), share, spec
         )
+        specular_rgb = shaded if shade is None else torch.zeros_like(diffuse).index_put((shade,), shaded)
     else:
         specular_rgb = torch.zeros_like(diffuse)
         env_w = env_s = torch.zeros(n, 0, 0, dtype=w.dtype, device=w.device)

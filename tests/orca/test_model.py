@@ -113,6 +113,37 @@ def test_warm_up_renders_geometry_without_virtual_cones():
     assert all(p.grad is None or p.grad.abs().sum() == 0 for p in model.env_field.parameters())
 
 
+def test_specular_for_chosen_rays_only():
+    """A bool tensor casts cones for the rays it marks: their specular is a full render's, the others' is zero
+    and their cones cost nothing (the cone weights are the marked rays'); geometry is unchanged. In training the
+    object pixels are marked, so a batch's off-object rays give the environment field no gradient through
+    cones."""
+    from dataclasses import replace
+
+    model = _model()
+    model.spec = replace(model.spec, render=replace(model.spec.render, deterministic=True))
+    batch = _batch(seed=3)
+    chosen = torch.arange(batch.radii.shape[0]) % 3 == 0
+    with torch.no_grad():
+        full = model(batch.origins, batch.dirs, batch.radii)
+        some = model(batch.origins, batch.dirs, batch.radii, specular=chosen)
+    for key in ("opacity", "diffuse", "normal", "depth"):
+        assert torch.allclose(getattr(full, key), getattr(some, key), atol=1e-6), key
+    assert full.specular[chosen].abs().sum() > 0
+    torch.testing.assert_close(some.specular[chosen], full.specular[chosen], atol=1e-6, rtol=1e-5)
+    assert some.specular[~chosen].abs().sum() == 0
+    with torch.no_grad():
+        every = model(batch.origins, batch.dirs, batch.radii, specular=torch.ones_like(chosen))
+    torch.testing.assert_close(every.specular, full.specular)
+    assert some.env_weights.shape[0] == int(chosen.sum())
+    torch.testing.assert_close(some.env_weights, full.env_weights[chosen], atol=1e-6, rtol=1e-5)
+    # none marked: a joint step still works (no distortion term), and gradients stay finite
+    nothing = batch._replace(mask=torch.zeros_like(batch.mask))
+    total, terms, _ = objective(model, nothing, LossWeights(background=0.0), "joint")
+    total.backward()
+    assert "distortion" not in terms and torch.isfinite(total)
+
+
 def test_background_batch_trains_only_the_environment_field():
     """Extra off-object rays add to the background term; their gradient reaches the environment field,
     never the SDF (the object's inside is masked without a graph)."""
