@@ -1,4 +1,5 @@
 """Training and rendering speed per preset: seconds per iteration, training rays/s, rendering rays/s.
+A step draws what `orca train`'s joint phase draws: object, background and sparse-depth rays.
 
     python bench/train_speed.py                       # every preset, on CUDA if there is a GPU, else CPU
     python bench/train_speed.py --device cpu --presets fast --steps 20
@@ -22,7 +23,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from orca.data import ImageSet  # noqa: E402
+from orca.data import ImageSet, SparseDepth  # noqa: E402
 from orca.model import OrcaModel, objective  # noqa: E402
 from pipeline.cameras import intrinsics_from_fov, look_at  # noqa: E402
 from pipeline.config import PRESETS, load_config  # noqa: E402
@@ -30,10 +31,12 @@ from pipeline.model_io import loss_weights, model_spec, resolve_device  # noqa: 
 
 RESULTS = Path(__file__).parent / "results"
 VIEWS, WIDTH, HEIGHT, FOV_DEG, DISTANCE = 16, 320, 240, 40.0, 4.0
+DEPTH_POINTS_PER_VIEW = 500
 
 
 def synthetic_images(device: torch.device) -> ImageSet:
-    """``VIEWS`` cameras on a ring looking at the unit sphere; mask = the sphere's silhouette."""
+    """``VIEWS`` cameras on a ring looking at the unit sphere; mask = the sphere's silhouette; sparse depth at
+    random pixels (as the poses stage's points of the surroundings give it)."""
     fx, fy, cx, cy = intrinsics_from_fov(WIDTH, HEIGHT, FOV_DEG)
     K = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]])
     angles = np.linspace(0, 2 * np.pi, VIEWS, endpoint=False)
@@ -46,7 +49,10 @@ def synthetic_images(device: torch.device) -> ImageSet:
     masks = torch.from_numpy(np.broadcast_to(silhouette, (VIEWS, HEIGHT, WIDTH)).copy())
     valid = torch.ones_like(masks)
     f32 = lambda a: torch.from_numpy(np.asarray(a, dtype=np.float32))  # noqa: E731
-    return ImageSet(images, masks, valid, f32(np.broadcast_to(K, (VIEWS, 3, 3))), f32(c2w)).to(device)
+    points = DEPTH_POINTS_PER_VIEW * VIEWS
+    uv = torch.rand(points, 2, generator=g) * torch.tensor([WIDTH, HEIGHT])
+    depth = SparseDepth(torch.arange(points) % VIEWS, uv, 2 * DISTANCE * (1 + torch.rand(points, generator=g)))
+    return ImageSet(images, masks, valid, f32(np.broadcast_to(K, (VIEWS, 3, 3))), f32(c2w), depth=depth).to(device)
 
 
 def bench_preset(preset: str, device: torch.device, steps: int, warmup: int) -> dict:
@@ -62,11 +68,14 @@ def bench_preset(preset: str, device: torch.device, steps: int, warmup: int) -> 
         if device.type == "cuda":
             torch.cuda.synchronize()
 
+    use_depth = cfg.sampler.depth_rays > 0 and cfg.losses.sparse_depth > 0
+
     def step() -> None:
         batch = data.sample(cfg.batch_rays, cfg.sampler.object_fraction, g)
-        # the off-object rays of the environment field, as `orca train` draws them every iteration
+        # the off-object rays of the environment field and the sparse depth's, as `orca train` draws them
         background = data.sample_background(cfg.sampler.background_rays, g) if cfg.sampler.background_rays else None
-        total, _, _ = objective(model, batch, weights, "joint", background)
+        depth = data.sample_depth(cfg.sampler.depth_rays, g) if use_depth else None
+        total, _, _ = objective(model, batch, weights, "joint", background, depth)
         optimizer.zero_grad(set_to_none=True)
         total.backward()
         torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
@@ -96,6 +105,7 @@ def bench_preset(preset: str, device: torch.device, steps: int, warmup: int) -> 
         render_s = (time.perf_counter() - t0) / max(steps // 2, 1)
     return {
         "preset": preset, "batch_rays": cfg.batch_rays, "background_rays": cfg.sampler.background_rays,
+        "depth_rays": cfg.sampler.depth_rays if use_depth else 0,
         "iterations": cfg.iterations,
         "seconds_per_iteration": per_step, "train_rays_per_second": cfg.batch_rays / per_step,
         "render_rays_per_second": cfg.batch_rays / render_s,
