@@ -51,6 +51,11 @@ class RenderSpec:
     env_far: float = 1e3  # the room may be far; the contraction keeps this finite
     ior: float = 1.5  # dielectric coating (Fresnel)
     deterministic: bool = False
+    # Rays less opaque than this cast no virtual cones: their specular is at most this share of the
+    # environment's radiance. A rendered view's pixels beside the object (inside its bounding sphere) are then
+    # nearly free; training keeps 0 (every ray the loss reads is shaded).
+    shade_min_opacity: float = 0.0
+    shade_min_opacity_render: float = 1e-4  # shade_min_opacity when a trained model renders (for_rendering)
 
     def for_rendering(self) -> RenderSpec:
         """The spec a trained model renders with: deterministic (a view rendered twice is the same image) and
@@ -58,7 +63,7 @@ class RenderSpec:
         random samples every step, a rendered view has one fixed set, and too few of them step through a
         thin prop to the wall behind it."""
         fine = self.env_fine if self.env_fine_render is None else self.env_fine_render
-        return replace(self, deterministic=True, env_fine=fine)
+        return replace(self, deterministic=True, env_fine=fine, shade_min_opacity=self.shade_min_opacity_render)
 
 
 class RayOutputs(NamedTuple):
@@ -274,6 +279,14 @@ def shade_specular(
     return specular, env_w.reshape(n, k, -1), env_s.reshape(n, k, -1)
 
 
+def _shaded_rays(specular: bool | torch.Tensor, opacity: torch.Tensor, min_opacity: float) -> torch.Tensor | None:
+    """Indices ``(M,)`` of the rays that cast virtual cones, or None for every ray (see :func:`render_rays`)."""
+    chosen = specular if isinstance(specular, torch.Tensor) else torch.full_like(opacity, specular, dtype=torch.bool)
+    if min_opacity > 0:
+        chosen = chosen & (opacity.detach() > min_opacity)
+    return None if bool(chosen.all()) else chosen.nonzero().squeeze(-1)
+
+
 def render_rays(
     sdf_field: SDFField,
     env_field: EnvironmentField,
@@ -292,7 +305,8 @@ def render_rays(
             radius growth (mip-NeRF ``radii``).
         specular: False skips the virtual cones (specular zero, no cone weights): geometry alone, as the
             mask-only warm-up needs, at a fraction of the cost. A ``(N,)`` bool tensor casts cones for those
-            rays only (training: the pixels whose colour a loss reads); the others' specular is zero.
+            rays only (training: the pixels whose colour a loss reads); the others' specular is zero. Either way
+            rays below ``spec.shade_min_opacity`` cast none.
     Returns:
         :class:`RayOutputs`; its cone weights and edges are the shaded rays' only, ``(M, K, E)``.
     """
@@ -327,14 +341,8 @@ def render_rays(
     normal_map = (w[..., None] * normals).sum(-2)
     depth = (w * mid).sum(-1)
 
-    shade = None  # the rays that cast cones; None: every ray
-    cast = specular
-    if isinstance(specular, torch.Tensor):
-        shade = specular.nonzero().squeeze(-1)
-        cast = shade.numel() > 0
-        if shade.numel() == n:
-            shade = None
-    if cast:
+    shade = _shaded_rays(specular, opacity, spec.shade_min_opacity)
+    if shade is None or shade.numel():
         # Virtual cones at the highest-weight samples only.
         pick = (lambda t: t) if shade is None else (lambda t: t[shade])  # noqa: E731
         m = n if shade is None else shade.numel()
@@ -352,7 +360,7 @@ def render_rays(
         specular_rgb = shaded if shade is None else torch.zeros_like(diffuse).index_put((shade,), shaded)
     else:
         specular_rgb = torch.zeros_like(diffuse)
-        env_w = env_s = torch.zeros(n, 0, 0, dtype=w.dtype, device=w.device)
+        env_w = env_s = torch.zeros(0, 0, 0, dtype=w.dtype, device=w.device)
     return RayOutputs(
         rgb=diffuse + specular_rgb, diffuse=diffuse, specular=specular_rgb, normal=normal_map, opacity=opacity,
         depth=depth, sdf_grad=grad.reshape(n, s_count, 3), weights=w, t=t,

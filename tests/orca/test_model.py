@@ -137,6 +137,16 @@ def test_specular_for_chosen_rays_only():
     torch.testing.assert_close(every.specular, full.specular)
     assert some.env_weights.shape[0] == int(chosen.sum())
     torch.testing.assert_close(some.env_weights, full.env_weights[chosen], atol=1e-6, rtol=1e-5)
+    # rays less opaque than shade_min_opacity cast no cones (a rendered view's pixels beside the object)
+    threshold = float(full.opacity.median())
+    model.spec = replace(model.spec, render=replace(model.spec.render, shade_min_opacity=threshold))
+    with torch.no_grad():
+        opaque_only = model(batch.origins, batch.dirs, batch.radii)
+    opaque = full.opacity > threshold
+    assert 0 < int(opaque.sum()) < opaque.numel()
+    torch.testing.assert_close(opaque_only.specular[opaque], full.specular[opaque], atol=1e-6, rtol=1e-5)
+    assert opaque_only.specular[~opaque].abs().sum() == 0
+    assert model.spec.render.for_rendering().shade_min_opacity == model.spec.render.shade_min_opacity_render > 0
     # none marked: a joint step still works (no distortion term), and gradients stay finite
     nothing = batch._replace(mask=torch.zeros_like(batch.mask))
     total, terms, _ = objective(model, nothing, LossWeights(background=0.0), "joint")

@@ -177,7 +177,9 @@ def test_a_trained_model_renders_deterministically_with_its_own_fine_samples():
     spec = RenderSpec(env_samples=16, env_fine=8, env_fine_render=32)
     rendering = spec.for_rendering()
     assert rendering.deterministic and rendering.env_fine == 32
-    assert replace(rendering, deterministic=False, env_fine=8) == spec  # nothing else changes
+    assert rendering.shade_min_opacity == spec.shade_min_opacity_render > 0  # no cones beside the object
+    # nothing else changes
+    assert replace(rendering, deterministic=False, env_fine=8, shade_min_opacity=spec.shade_min_opacity) == spec
     assert RenderSpec(env_fine=8).for_rendering().env_fine == 8  # no render count: training's
 
 
