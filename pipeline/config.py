@@ -566,6 +566,13 @@ class TrainConfig(StrictModel):
         "short training"
     )
     lr_final_ratio: float = Field(0.05, gt=0, le=1, description="exponential decay to lr x ratio at the end")
+    environment_lr: float | None = Field(
+        None, gt=0, description="learning rate of the environment field (decays as train.lr does; none: train.lr)"
+    )
+    adam_beta2: float = Field(
+        0.999, gt=0, lt=1, description="Adam's second-moment decay (hash grids' rarely touched rows adapt faster "
+        "with a lower one)"
+    )
     grad_clip: float = Field(1.0, gt=0)
     device: Literal["auto", "cpu", "cuda"] = "auto"
     seed: int = 0

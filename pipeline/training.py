@@ -72,11 +72,17 @@ def with_far_from_points(cfg: TrainConfig, data, points_dir: Path | None) -> Tra
 
 
 def parameter_groups(model, cfg: TrainConfig) -> list[dict]:
-    """The optimizer's parameter groups: the fields and β at ``cfg.lr``, the per-photo gains (if the model
-    learns them) at ``cfg.appearance_lr``."""
+    """The optimizer's parameter groups: the fields and β at ``cfg.lr`` (the environment field in a group of its
+    own at ``cfg.environment_lr`` when that is set), the per-photo gains (if the model learns them) at
+    ``cfg.appearance_lr``. Without those two options there is one group, as checkpoints of earlier versions
+    hold."""
     gains = model.log_gains
-    fields = [p for p in model.parameters() if p is not gains]
-    return [{"params": fields}] + ([{"params": [gains], "lr": cfg.appearance_lr}] if gains is not None else [])
+    environment = list(model.env_field.parameters()) if cfg.environment_lr else []
+    taken = {id(p) for p in environment} | {id(gains)}
+    groups = [{"params": [p for p in model.parameters() if id(p) not in taken]}]
+    if environment:
+        groups.append({"params": environment, "lr": cfg.environment_lr})
+    return groups + ([{"params": [gains], "lr": cfg.appearance_lr}] if gains is not None else [])
 
 
 def train(data, model, cfg: TrainConfig, ckpt_dir: Path, *, restart: bool = False,
@@ -95,7 +101,7 @@ def train(data, model, cfg: TrainConfig, ckpt_dir: Path, *, restart: bool = Fals
 
     identity = training_identity(cfg, data)
     data = data.to(next(model.parameters()).device)
-    optimizer = torch.optim.Adam(parameter_groups(model, cfg), lr=cfg.lr, eps=1e-15)
+    optimizer = torch.optim.Adam(parameter_groups(model, cfg), lr=cfg.lr, betas=(0.9, cfg.adam_beta2), eps=1e-15)
     decay = math.log(cfg.lr_final_ratio) / cfg.iterations
     scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda it: math.exp(decay * it))
     weights = loss_weights(cfg)

@@ -53,3 +53,20 @@ def test_weights_of_another_network_version_are_a_clear_error(tmp_path):
     state = {"model": {k: v for k, v in model.state_dict().items() if "level_weights" not in k}}
     with pytest.raises(InputError, match="--restart"):
         load_weights(model, state, tmp_path / "model.pt")
+
+
+def test_optimizer_groups_split_only_for_their_options():
+    """One group by default (what earlier checkpoints' optimizer states hold, so they still resume); the
+    environment field gets its own at train.environment_lr; every parameter is in exactly one group."""
+    from orca.model import OrcaModel
+    from pipeline.model_io import model_spec
+    from pipeline.training import parameter_groups
+
+    cfg = load_config(preset="fast").train
+    model = OrcaModel(model_spec(cfg))
+    default = parameter_groups(model, cfg)
+    assert len(default) == 1 and len(default[0]["params"]) == len(list(model.parameters()))
+    split = parameter_groups(model, cfg.model_copy(update={"environment_lr": 0.02}))
+    assert [g.get("lr") for g in split] == [None, 0.02]
+    assert {id(p) for p in split[1]["params"]} == {id(p) for p in model.env_field.parameters()}
+    assert sorted(id(p) for g in split for p in g["params"]) == sorted(id(p) for p in model.parameters())
