@@ -11,6 +11,8 @@ import torch
 from torch import nn
 from torch.autograd.function import once_differentiable
 
+from . import hashgrid_cpu
+
 
 def positional_encoding(x: torch.Tensor, num_freqs: int, include_input: bool = True) -> torch.Tensor:
     """NeRF's frequency encoding.
@@ -152,9 +154,13 @@ class HashGrid(nn.Module):
     Coarse levels whose dense grid fits in the table are indexed densely (no collisions); finer ones hash.
     """
 
-    def __init__(self, spec: HashGridSpec = HashGridSpec()):
+    def __init__(self, spec: HashGridSpec = HashGridSpec(), first_order: bool = False):
+        """``first_order``: the grid's gradients are never differentiated again (the environment field's; not
+        the SDF's, whose gradient the eikonal term differentiates): on the CPU it may then use the fused
+        lookup of :mod:`orca.hashgrid_cpu`."""
         super().__init__()
         self.spec = spec
+        self.first_order = first_order
         table = 2**spec.log2_table_size
         growth = math.exp((math.log(spec.max_resolution) - math.log(spec.base_resolution)) / max(spec.levels - 1, 1))
         resolutions, sizes, dense = [], [], []
@@ -200,6 +206,20 @@ class HashGrid(nn.Module):
         """
         n = x.shape[0]
         res = self._res.to(x.dtype)  # (L, 1)
+        if self.first_order and hashgrid_cpu.usable(self.table, x):
+            feats = hashgrid_cpu.FusedLookup.apply(self.table, x, self._res[:, 0], self._start, self._size,
+                                                   self.n_dense)
+        else:
+            feats = self._lookup(x, res)
+        feats = feats * self.level_weights[:, None].to(x.dtype)  # (N, L, F)
+        if scale is not None:
+            feats = feats * torch.erf(1.0 / torch.sqrt(8 * (scale[:, None] * res[:, 0]).square() + 1e-12))[..., None]
+        return feats.reshape(n, self.spec.out_dim)
+
+    def _lookup(self, x: torch.Tensor, res: torch.Tensor) -> torch.Tensor:
+        """``(N, 3)`` -> ``(N, L, F)`` trilinearly interpolated rows, in tensor operations (any device, any order
+        of differentiation)."""
+        n = x.shape[0]
         pos = x.clamp(0.0, 1.0)[:, None, :] * res  # (N, L, 3)
         base = pos.detach().floor().long().minimum(self._res - 1)  # res-1 keeps x == 1 inside the last voxel
         frac = pos - base
@@ -210,8 +230,4 @@ class HashGrid(nn.Module):
         w = (a[..., :, None, None, 0] * a[..., None, :, None, 1] * a[..., None, None, :, 2]).reshape(-1, 1, 8)
         levels, f = self.spec.levels, self.spec.features_per_level
         # one (1, 8) x (8, F) product per point and level: bmm is ~2x faster than multiply-and-sum on the CPU
-        feats = torch.bmm(w, values.reshape(-1, 8, f)).reshape(n, levels, f)
-        feats = feats * self.level_weights[:, None].to(x.dtype)  # (N, L, F)
-        if scale is not None:
-            feats = feats * torch.erf(1.0 / torch.sqrt(8 * (scale[:, None] * res[:, 0]).square() + 1e-12))[..., None]
-        return feats.reshape(n, -1)
+        return torch.bmm(w, values.reshape(-1, 8, f)).reshape(n, levels, f)

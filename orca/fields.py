@@ -145,7 +145,7 @@ class EnvironmentField(nn.Module):
         super().__init__()
         self.spec = spec
         if spec.encoding in ("hashgrid", "direction"):
-            self.grid: HashGrid | None = HashGrid(spec.hash_grid)
+            self.grid: HashGrid | None = HashGrid(spec.hash_grid, first_order=True)
             enc_dim = self.grid.out_dim
         else:
             self.grid = None
