@@ -153,4 +153,5 @@ class FusedLookup(torch.autograd.Function):
 
 def usable(table: torch.Tensor, x: torch.Tensor) -> bool:
     """Whether :class:`FusedLookup` can serve: numba installed, float32 tensors on the CPU."""
-    return AVAILABLE and table.device.type == "cpu" and x.device.type == "cpu" and table.dtype == x.dtype == torch.float32
+    on_cpu = table.device.type == x.device.type == "cpu"
+    return AVAILABLE and on_cpu and table.dtype == x.dtype == torch.float32
