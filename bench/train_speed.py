@@ -27,7 +27,10 @@ from orca.data import ImageSet, SparseDepth  # noqa: E402
 from orca.model import OrcaModel, objective  # noqa: E402
 from pipeline.cameras import intrinsics_from_fov, look_at  # noqa: E402
 from pipeline.config import PRESETS, load_config  # noqa: E402
-from pipeline.model_io import loss_weights, model_spec, resolve_device  # noqa: E402
+try:
+    from pipeline.model_io import loss_weights, model_spec, resolve_device  # noqa: E402
+except ImportError:  # an earlier tree (bench/demo_dag.py --baseline) kept them in its train stage
+    from pipeline.stages.train import loss_weights, model_spec, resolve_device  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 VIEWS, WIDTH, HEIGHT, FOV_DEG, DISTANCE = 16, 320, 240, 40.0, 4.0
@@ -68,13 +71,15 @@ def bench_preset(preset: str, device: torch.device, steps: int, warmup: int) -> 
         if device.type == "cuda":
             torch.cuda.synchronize()
 
-    use_depth = cfg.sampler.depth_rays > 0 and cfg.losses.sparse_depth > 0
+    # an earlier tree (bench/demo_dag.py --baseline) kept the sampler's keys in train itself
+    sampler = getattr(cfg, "sampler", cfg)
+    use_depth = sampler.depth_rays > 0 and cfg.losses.sparse_depth > 0
 
     def step() -> None:
-        batch = data.sample(cfg.batch_rays, cfg.sampler.object_fraction, g)
+        batch = data.sample(cfg.batch_rays, sampler.object_fraction, g)
         # the off-object rays of the environment field and the sparse depth's, as `orca train` draws them
-        background = data.sample_background(cfg.sampler.background_rays, g) if cfg.sampler.background_rays else None
-        depth = data.sample_depth(cfg.sampler.depth_rays, g) if use_depth else None
+        background = data.sample_background(sampler.background_rays, g) if sampler.background_rays else None
+        depth = data.sample_depth(sampler.depth_rays, g) if use_depth else None
         total, _, _ = objective(model, batch, weights, "joint", background, depth)
         optimizer.zero_grad(set_to_none=True)
         total.backward()
@@ -104,8 +109,8 @@ def bench_preset(preset: str, device: torch.device, steps: int, warmup: int) -> 
         sync()
         render_s = (time.perf_counter() - t0) / max(steps // 2, 1)
     return {
-        "preset": preset, "batch_rays": cfg.batch_rays, "background_rays": cfg.sampler.background_rays,
-        "depth_rays": cfg.sampler.depth_rays if use_depth else 0,
+        "preset": preset, "batch_rays": cfg.batch_rays, "background_rays": sampler.background_rays,
+        "depth_rays": sampler.depth_rays if use_depth else 0,
         "iterations": cfg.iterations,
         "seconds_per_iteration": per_step, "train_rays_per_second": cfg.batch_rays / per_step,
         "render_rays_per_second": cfg.batch_rays / render_s,
