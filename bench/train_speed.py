@@ -27,6 +27,7 @@ from orca.data import ImageSet, SparseDepth  # noqa: E402
 from orca.model import OrcaModel, objective  # noqa: E402
 from pipeline.cameras import intrinsics_from_fov, look_at  # noqa: E402
 from pipeline.config import PRESETS, load_config  # noqa: E402
+
 try:
     from pipeline.model_io import loss_weights, model_spec, resolve_device  # noqa: E402
 except ImportError:  # an earlier tree (bench/demo_dag.py --baseline) kept them in its train stage
