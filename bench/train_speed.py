@@ -3,10 +3,11 @@ A step draws what `orca train`'s joint phase draws: object, background and spars
 
     python bench/train_speed.py                       # every preset, on CUDA if there is a GPU, else CPU
     python bench/train_speed.py --device cpu --presets fast --steps 20
+    python bench/train_speed.py --presets fast --results results/demo    # on the demo's own inputs
 
-The data are a synthetic ring of posed images of a sphere-sized object (the speed of a step does not
-depend on the pixels' values), so the benchmark needs no capture. Prints a table and writes
-bench/results/train_speed_<device>.json with the machine's description.
+The data are a synthetic ring of posed images of a sphere-sized object (the speed of a step hardly depends on
+the pixels' values), so the benchmark needs no capture; --results times the inputs of a DAG's run instead.
+Prints a table and writes bench/results/train_speed_<device>.json with the machine's description.
 """
 
 from __future__ import annotations
@@ -59,10 +60,26 @@ def synthetic_images(device: torch.device) -> ImageSet:
     return ImageSet(images, masks, valid, f32(np.broadcast_to(K, (VIEWS, 3, 3))), f32(c2w), depth=depth).to(device)
 
 
-def bench_preset(preset: str, device: torch.device, steps: int, warmup: int) -> dict:
+def capture_images(results: Path, cfg):
+    """The training inputs `orca train` reads from a DAG's results folder (decode, masks' cameras and masks,
+    the poses stage's points), and ``cfg`` with the environment's reach from those points."""
+    from pipeline.training import with_far_from_points
+    from pipeline.training_data import load_image_set
+
+    points = results / "poses" / "sparse"
+    data, _ = load_image_set(results / "decode", results / "masks" / "cameras.json", results / "masks" / "masks",
+                             points, cfg.sampler.depth_object_margin_px)
+    return data, with_far_from_points(cfg, data, points)
+
+
+def bench_preset(preset: str, device: torch.device, steps: int, warmup: int, results: Path | None = None) -> dict:
     cfg = load_config(preset=preset).train
     torch.manual_seed(0)
-    data = synthetic_images(device)
+    if results is None:
+        data = synthetic_images(device)
+    else:
+        data, cfg = capture_images(results, cfg)
+        data = data.to(device)
     model = OrcaModel(model_spec(cfg)).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=cfg.lr, eps=1e-15)
     weights = loss_weights(cfg)
@@ -127,11 +144,13 @@ def main() -> None:
     p.add_argument("--steps", type=int, default=10, help="timed iterations per preset")
     p.add_argument("--warmup", type=int, default=3)
     p.add_argument("--out", type=Path, default=None)
+    p.add_argument("--results", type=Path, default=None,
+                   help="time on a capture's own inputs: a DAG's results/<capture> folder (decode, poses, masks)")
     args = p.parse_args()
     device = resolve_device(args.device)
     rows = []
     for preset in args.presets:
-        row = bench_preset(preset, device, args.steps, args.warmup)
+        row = bench_preset(preset, device, args.steps, args.warmup, args.results)
         rows.append(row)
         print(f"{preset:9s} {row['seconds_per_iteration']:8.3f} s/it  "
               f"{row['train_rays_per_second']:9.0f} train rays/s  "
@@ -145,7 +164,9 @@ def main() -> None:
     }
     out = args.out or RESULTS / f"train_speed_{device.type}.json"
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"machine": machine, "steps": args.steps, "results": rows}, indent=2) + "\n")
+    inputs = str(args.results) if args.results else "synthetic ring of 16 views"
+    out.write_text(json.dumps({"machine": machine, "steps": args.steps, "inputs": inputs, "results": rows}, indent=2)
+                   + "\n")
     print(f"wrote {out}")
 
 
