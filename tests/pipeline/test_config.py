@@ -79,7 +79,7 @@ FLAT_PRESETS = {
     "fast": {
         "poses": {"max_image_size": 1024},
         "train": {
-            "iterations": 3000, "batch_rays": 512, "mask_warmup": 300, "checkpoint_every": 250,
+            "iterations": 1000, "batch_rays": 512, "mask_warmup": 100, "checkpoint_every": 250,
             "preview_every": 500, "grid_levels": 8, "grid_log2_table": 17, "grid_max_resolution": 128,
             "texture_levels": 8, "texture_log2_table": 17, "texture_max_resolution": 512,
             "env_grid_log2_table": 17, "n_coarse": 24, "n_fine": 8, "upsample_steps": 2, "band_samples": 16,
