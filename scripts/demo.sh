@@ -7,7 +7,7 @@ bash "$ROOT/scripts/setup.sh"
 cd "$ROOT"
 export PATH="${ORCA_VENV:-$ROOT/.venv}/bin:$PATH"
 if [ ! -f captures/demo/ground_truth/scene.json ]; then
-    echo "[demo] rendering the demo capture captures/demo (once; about 10 minutes on 2 cores)" >&2
+    echo "[demo] rendering the demo capture captures/demo (once; about 4 minutes on 2 cores)" >&2
     orca synth sphere captures/demo --overwrite
 fi
 exec snakemake --cores "${ORCA_CORES:-2}" --config captures='["demo"]' "$@"
