@@ -61,14 +61,17 @@ def synthetic_images(device: torch.device) -> ImageSet:
 
 
 def capture_images(results: Path, cfg):
-    """The training inputs `orca train` reads from a DAG's results folder (decode, masks' cameras and masks,
-    the poses stage's points), and ``cfg`` with the environment's reach from those points."""
+    """The training inputs `orca train` reads from a DAG's results folder (the images the masks stage's cameras
+    point at, as the Snakefile finds them; its masks; the poses stage's points), and ``cfg`` with the
+    environment's reach from those points."""
+    from pipeline.cameras import load_cameras
+    from pipeline.results import image_folder
     from pipeline.training import with_far_from_points
     from pipeline.training_data import load_image_set
 
-    points = results / "poses" / "sparse"
-    data, _ = load_image_set(results / "decode", results / "masks" / "cameras.json", results / "masks" / "masks",
-                             points, cfg.sampler.depth_object_margin_px)
+    cameras, points = results / "masks" / "cameras.json", results / "poses" / "sparse"
+    images = image_folder(load_cameras(cameras), cameras.parent, results / "decode")
+    data, _ = load_image_set(images, cameras, results / "masks" / "masks", points, cfg.sampler.depth_object_margin_px)
     return data, with_far_from_points(cfg, data, points)
 
 

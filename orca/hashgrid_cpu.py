@@ -31,7 +31,7 @@ else:
     if "NUMBA_THREADING_LAYER" not in os.environ:
         numba.config.THREADING_LAYER = "workqueue"
 
-# Instant-NGP's primes (orca.encoding._PRIMES), spelled out: numba compiles module constants in.
+# Instant-NGP's primes, as orca.encoding._PRIMES (which imports this module, so they cannot be imported here).
 _P1, _P2 = 2654435761, 805459861
 
 AVAILABLE = njit is not None
