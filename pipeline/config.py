@@ -254,6 +254,13 @@ class MasksConfig(StrictModel):
         "object (robust to a few wrong masks; a smaller share: tighter around thin parts, less robust)"
     )
     carve_votes: int = Field(3, ge=1, description="...and at least this many views (1: the classic visual hull)")
+    core_fraction: float = Field(
+        0.2, ge=0, lt=1, description="from the second round, GrabCut takes as certain object only the part of the "
+        "hull's reprojection farther from its outline than this share of its deepest pixel's distance; the rest "
+        "of the hull is probable object, for colour to decide. Forced, a hull fattened by loose first masks keeps "
+        "its wedges of floor and wall in every round; more: colour decides more, and a glossy object loses the "
+        "parts that mirror the room (0: the whole hull but a 3 px rim is certain object)"
+    )
     seed_radius: float = Field(
         0.3, ge=0, lt=1, description="before any hull, the central part of the unit sphere's image (this fraction of "
         "its radius) is taken as object: the cameras converge on it (of the first sphere's radius when the "

@@ -72,8 +72,9 @@ def first_seeds(sphere: np.ndarray, background: np.ndarray, seed_radius: float,
 
 def hull_seeds(hull: np.ndarray, keep_out: np.ndarray | None, background: np.ndarray, floor: np.ndarray | None,
                erode_px: int, band_px: int, clipped: np.ndarray | None = None,
-               known_object: np.ndarray | None = None) -> np.ndarray:
-    """GrabCut labels from the hull's reprojection: certain object in the hull's eroded core (but not in
+               known_object: np.ndarray | None = None, core_fraction: float = 0.0) -> np.ndarray:
+    """GrabCut labels from the hull's reprojection: certain object in the hull's core -- eroded by ``erode_px``
+    and farther from the outline than ``core_fraction`` of its deepest pixel's distance (but not in
     ``keep_out``, where the hull is known to be wrong) and on clipped highlights inside the hull (a glossy
     object's highlights are white like many backgrounds), probable object in the rest of the hull, probable
     background in a band around it, certain background beyond and in ``background`` and wherever the floor was
@@ -85,6 +86,11 @@ def hull_seeds(hull: np.ndarray, keep_out: np.ndarray | None, background: np.nda
     seeds[cv2.dilate(h8, disc(band_px)) > 0] = cv2.GC_PR_BGD
     seeds[hull] = cv2.GC_PR_FGD
     core = cv2.erode(h8, disc(erode_px)) > 0
+    if core_fraction > 0:
+        # A hull fattened by loose first masks (a wedge of carpet beside the object) is certain object only in
+        # its deep core, so GrabCut can trim the rest by colour; forced, it would keep the wedge in every round.
+        inside = cv2.distanceTransform(h8, cv2.DIST_L2, 5)
+        core &= inside > core_fraction * float(inside.max(initial=0.0))
     if keep_out is not None:
         core &= ~keep_out
     if clipped is not None:

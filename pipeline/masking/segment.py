@@ -243,7 +243,8 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
                 new.append(fixed[i])
             else:
                 seeds = hull_seeds(hulls[i], _released(occluded[i], fronts[i], through[i], opts), backgrounds[i],
-                                   floors[i], opts.core_erode_px, opts.band_px, v.clipped, evidence.objects[i])
+                                   floors[i], opts.core_erode_px, opts.band_px, v.clipped, evidence.objects[i],
+                                   opts.core_fraction)
                 new.append(grabcut(v.image, seeds, opts.grabcut_iterations))
             step("segment")
         agreement = [iou(a, b) for a, b in zip(new, hulls)]
