@@ -8,6 +8,7 @@ import cv2
 import numpy as np
 
 from pipeline.cameras import look_at
+from pipeline.masking.grabcut import grabcut, hull_seeds
 from pipeline.masking.hull import carve, hull_depth, hull_grid, in_hull, reproject
 from pipeline.masking.prior import find_prior_sphere, in_sphere_frame
 from pipeline.masking.segment import core_lost, final_mask
@@ -528,3 +529,29 @@ def test_the_final_mask_trims_the_hull_by_the_views_colours_unless_they_failed()
     np.testing.assert_array_equal(final_mask(half, hull, background, None, opts), hull & ~background)
     lost = final_mask(half, hull, background, None, SegmentOptions(final_max_core_lost=1.0))
     assert iou(lost, obj) < 0.6  # without the fallback the view keeps only what its colours found
+
+
+def test_grabcut_trims_a_hull_too_large_by_a_ring_of_carpet_only_when_its_core_is_not_forced():
+    """A brass disc (radius 30 px) on a noisy red carpet, and a hull 8 px larger all round (loose first masks kept
+    a ring of carpet): with the whole hull but a 3 px rim forced as object the ring stays; with only the hull's
+    deep core forced (``core_fraction`` 0.2: deeper than 7.6 px) GrabCut gives the ring back to the carpet by
+    colour and keeps the disc."""
+    rng = np.random.default_rng(0)
+    yy, xx = np.mgrid[:120, :160]
+    r2 = (yy - 60) ** 2 + (xx - 70) ** 2
+    obj, hull = r2 < 30**2, r2 < 38**2
+    image = np.clip(rng.normal((150, 40, 60), 18, (120, 160, 3)), 0, 255)
+    image[obj] = np.clip(rng.normal((170, 130, 60), 12, (obj.sum(), 3)), 0, 255)
+    image = image.astype(np.uint8)
+    masks = {}
+    for fraction in (0.0, 0.2):
+        seeds = hull_seeds(hull, None, np.zeros_like(obj), None, 3, 4, core_fraction=fraction)
+        masks[fraction] = grabcut(image, seeds, 4)
+        forced = seeds == cv2.GC_FGD
+        assert forced[r2 < 25**2].all()
+        if fraction:  # nothing more than a pixel off the disc
+            assert np.sqrt(r2[forced].max()) < 31
+        else:
+            assert (forced & ~obj).sum() > 0.5 * (hull & ~obj).sum()
+    assert iou(masks[0.0], obj) < 0.7
+    assert iou(masks[0.2], obj) > 0.9
