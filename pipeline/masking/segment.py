@@ -244,7 +244,7 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
             else:
                 seeds = hull_seeds(hulls[i], _released(occluded[i], fronts[i], through[i], opts), backgrounds[i],
                                    floors[i], opts.core_erode_px, opts.band_px, v.clipped, evidence.objects[i],
-                                   opts.core_fraction)
+                                   opts.core_fraction if opts.core_fraction_last or r < opts.rounds - 1 else 0.0)
                 new.append(grabcut(v.image, seeds, opts.grabcut_iterations))
             step("segment")
         agreement = [iou(a, b) for a, b in zip(new, hulls)]

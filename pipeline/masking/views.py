@@ -55,6 +55,7 @@ class SegmentOptions:
     carve_share: float = 0.2
     core_erode_px: int = 3
     core_fraction: float = 0.0
+    core_fraction_last: bool = True
     band_px: int = 4
     neighbours: int = 6
     neighbour_max_deg: float = 60.0
