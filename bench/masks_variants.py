@@ -144,10 +144,11 @@ def main() -> None:
         overrides = {k: json.loads(v) for k, v in (o.split("=", 1) for o in args.overrides)}
         build(args.results, args.cache, None if args.blowtorch else args.reference, overrides)
         return
+    code = commit()  # the code this process imported, whatever the tree holds when a variant ends
     for text in args.variant or ["{}"]:
         record = evaluate(args.caches, json.loads(text), args.pictures)
         if not args.no_record:
-            record = {"date": datetime.now().isoformat(timespec="seconds"), "machine": machine(), "commit": commit(),
+            record = {"date": datetime.now().isoformat(timespec="seconds"), "machine": machine(), "commit": code,
                       **record}
             with open(args.results, "a", encoding="utf-8") as f:
                 f.write(json.dumps(record) + "\n")

@@ -237,6 +237,10 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
         # Both are certain background: no mask keeps them, and the floor confirms the view's votes in the next carve.
         backgrounds = [np.logical_or.reduce([e for e in (b, t, f) if e is not None])
                        for b, t, f in zip(evidence.backgrounds, through, fronts)]
+        # Before the last round only the hull's deep core is certain object: colour trims the wedges of room that
+        # loose first masks leave in the hull, and the next carve removes them (they are off the object in many
+        # views). The last round forces the whole core again: a glossy rim that mirrors the room is lost by colour
+        # only in the few views that see it at the outline, so the hull kept it, and these masks keep it too.
         new = []
         for i, v in enumerate(views):
             if i in fixed:
@@ -244,7 +248,7 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
             else:
                 seeds = hull_seeds(hulls[i], _released(occluded[i], fronts[i], through[i], opts), backgrounds[i],
                                    floors[i], opts.core_erode_px, opts.band_px, v.clipped, evidence.objects[i],
-                                   opts.core_fraction if opts.core_fraction_last or r < opts.rounds - 1 else 0.0)
+                                   opts.core_fraction if r < opts.rounds - 1 else 0.0)
                 new.append(grabcut(v.image, seeds, opts.grabcut_iterations))
             step("segment")
         agreement = [iou(a, b) for a, b in zip(new, hulls)]

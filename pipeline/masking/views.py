@@ -54,8 +54,7 @@ class SegmentOptions:
     carve_votes: float = 3.0
     carve_share: float = 0.2
     core_erode_px: int = 3
-    core_fraction: float = 0.0
-    core_fraction_last: bool = True
+    core_fraction: float = 0.2
     band_px: int = 4
     neighbours: int = 6
     neighbour_max_deg: float = 60.0
