@@ -74,7 +74,10 @@ def build(results: Path, cache: Path, reference: Path | None, overrides: dict[st
     undistortion = poses_undistortion(results) if reference is None else None
     refs = []
     for cam, view in zip(cameras.cameras, views):
-        path = next((DATASET / USER_MASKS).glob(cam.name + ".*")) if reference is None else reference / f"{cam.name}.png"
+        if reference is None:
+            path = next((DATASET / USER_MASKS).glob(cam.name + ".*"))
+        else:
+            path = reference / f"{cam.name}.png"
         full = reference_mask(path, (cam.width, cam.height), undistortion)
         refs.append(cv2.resize(full.astype(np.float32), view.shape[::-1], interpolation=cv2.INTER_AREA) >= 0.5)
     cache.parent.mkdir(parents=True, exist_ok=True)
