@@ -119,13 +119,19 @@ def run_stage(stage: str, capture: Path, results: Path, overrides: Sequence[str]
     for o in overrides:
         cmd += ["--set", o]
     log = results / f"{stage}.log"
+    seconds, peak_mb, returncode = timed(cmd, log)
+    return StageRun(stage, seconds, peak_mb, returncode, log.read_text(encoding="utf-8"))
+
+
+def timed(cmd: Sequence[str], log: Path) -> tuple[float, float, int]:
+    """Run ``cmd`` with its stdout and stderr in ``log``: its wall time (s), peak RSS (MB; ``wait4``'s, the process
+    and the children it waited for) and exit code."""
     started = time.perf_counter()
     with open(log, "w", encoding="utf-8") as out:
-        proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT)
+        proc = subprocess.Popen(list(cmd), stdout=out, stderr=subprocess.STDOUT)
         _, status, usage = os.wait4(proc.pid, 0)
     proc.returncode = os.waitstatus_to_exitcode(status)  # reaped here: Popen must not wait for it again
-    seconds = time.perf_counter() - started
-    return StageRun(stage, seconds, usage.ru_maxrss / 1024, proc.returncode, log.read_text(encoding="utf-8"))
+    return time.perf_counter() - started, usage.ru_maxrss / 1024, proc.returncode
 
 
 def run_front_end(capture: Path, results: Path, overrides: Sequence[str] = (),

@@ -40,12 +40,11 @@ from pipeline.config import MasksConfig  # noqa: E402
 from pipeline.layout import CAMERAS_JSON, POSES, SPARSE, USER_MASKS  # noqa: E402
 from pipeline.masking.prior import find_prior_sphere, framed_options, in_sphere_frame  # noqa: E402
 from pipeline.masking.scale import load_view  # noqa: E402
-from pipeline.masking.segment import gather_evidence, refine, segment  # noqa: E402
+from pipeline.masking.segment import gather_evidence, probe_masks, refine, segment_options  # noqa: E402
 from pipeline.masking.tracks import tracks_for_views  # noqa: E402
 from pipeline.metrics import iou  # noqa: E402
 from pipeline.results import image_folder, load_decode  # noqa: E402
 from pipeline.sparse_depth import load_sparse_points  # noqa: E402
-from pipeline.stages.masks import segment_options  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "masks_variants.jsonl"
 
@@ -65,8 +64,7 @@ def build(results: Path, cache: Path, reference: Path | None, overrides: dict[st
         tracks = tracks_for_views(points.xyz, points.observers, names) if len(points.xyz) else None
     opts = segment_options(config)
     started = time.time()
-    prior = find_prior_sphere(views, opts, lambda vs, o, c, r: segment(
-        vs, o, tracks=tracks.framed(c, r) if tracks is not None else None).masks)
+    prior = find_prior_sphere(views, opts, probe_masks(tracks))
     views = [in_sphere_frame(v, prior.centre, prior.radius) for v in views]
     opts = framed_options(opts, prior.radius)
     framed = tracks.framed(prior.centre, prior.radius) if tracks is not None else None

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import cv2
 import numpy as np
 
+from ..config import MasksConfig
 from ..metrics import iou
 from ..object_frame import camera_up
 from .grabcut import first_seeds, grabcut, hull_seeds
@@ -165,6 +166,22 @@ def segment(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.nda
     step = on_step or (lambda label: None)
     evidence = gather_evidence(views, opts, fixed, step, tracks)
     return refine(views, opts, evidence, fixed, step)
+
+
+def probe_masks(tracks: Tracks | None, fixed: dict[int, np.ndarray] | None = None
+                ) -> Callable[[Sequence[View], SegmentOptions, np.ndarray, float], list[np.ndarray]]:
+    """The driver :func:`.prior.find_prior_sphere` probes with: :func:`segment` on views framed by the sphere
+    ``(centre, radius)``, the sparse points ``tracks`` (frame of the unframed views, or None) framed the same way."""
+    def probe(views: Sequence[View], opts: SegmentOptions, centre: np.ndarray, radius: float) -> list[np.ndarray]:
+        return segment(views, opts, fixed=fixed,
+                       tracks=tracks.framed(centre, radius) if tracks is not None else None).masks
+    return probe
+
+
+def segment_options(config: MasksConfig) -> SegmentOptions:
+    """The method's knobs a user sets, from the masks config section's fields of the same names."""
+    return SegmentOptions(**{f.name: getattr(config, f.name) for f in fields(SegmentOptions)
+                             if f.name in type(config).model_fields})
 
 
 def _log_found(r: int, what: str, views: Sequence[View], found: Sequence[np.ndarray | None]) -> None:

@@ -51,7 +51,7 @@ import argparse
 import logging
 import os
 import time
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -89,9 +89,9 @@ from ..log import progress
 from ..masking.hull import carve, carve_votes, hull_grid, reproject
 from ..masking.prior import PriorSphere, find_prior_sphere, framed_options, in_sphere_frame, touching_views
 from ..masking.scale import full_size_mask, load_view, reduce
-from ..masking.segment import segment
+from ..masking.segment import probe_masks, segment, segment_options
 from ..masking.tracks import tracks_for_views
-from ..masking.views import Plane, SegmentOptions, View
+from ..masking.views import Plane, View
 from ..media import write_point_cloud
 from ..metrics import iou
 from ..object_frame import renormalized, sphere_from_masks
@@ -190,8 +190,7 @@ def run_masks(
             views = [in_sphere_frame(v, prior.centre, prior.radius) for v in views]
         else:
             probe = bar.add_task("sphere prior", total=None)
-            prior = find_prior_sphere(views, opts, lambda vs, o, c, r: segment(
-                vs, o, fixed=fixed, tracks=tracks.framed(c, r) if tracks is not None else None).masks)
+            prior = find_prior_sphere(views, opts, probe_masks(tracks, fixed))
             bar.update(probe, total=1, completed=1)
             views = [in_sphere_frame(v, prior.centre, prior.radius) for v in views]
             # the support plane, floor and first GrabCut per view; per round the carve, GrabCut per view and, from
@@ -300,12 +299,6 @@ def run_masks(
              np.array2string(centre, precision=3), radius, out_dir, seconds)
     return MasksResult(out_dir, names, sorted(user_files), centre, float(radius),
                        {"median": summary["median"], "min": summary["min"]}, warnings, seconds)
-
-
-def segment_options(config: MasksConfig) -> SegmentOptions:
-    """The method's knobs a user sets, from the config section of the same names."""
-    return SegmentOptions(**{f.name: getattr(config, f.name) for f in fields(SegmentOptions)
-                             if f.name in type(config).model_fields})
 
 
 def _photos_without_camera(poses_dir: Path, decoded: DecodeArtifacts, names: list[str]) -> set[str]:
