@@ -258,7 +258,7 @@ class MasksConfig(StrictModel):
         0.2, ge=0, lt=1, description="in every round but the last, GrabCut takes as certain object only the part of "
         "the hull's reprojection farther from its outline than this share of its deepest pixel's distance; the "
         "rest is probable object, for colour to decide. Forced, a hull fattened by loose first masks keeps its "
-        "wedges of floor and wall in every round (the blowtorch: 0.795 median IoU at 0, 0.849 at 0.2). The last "
+        "wedges of floor and wall in every round (the blowtorch: 0.795 median IoU at 0, 0.850 at 0.2). The last "
         "round forces the whole core (but a 3 px rim) again, so a glossy rim that mirrors the room stays; 0: "
         "every round forces it"
     )
