@@ -459,7 +459,23 @@ class SDFConfig(StrictModel):
     encoding: Literal["hashgrid", "frequency"] = "hashgrid"
     hidden: int = Field(64, ge=8)
     layers: int = Field(2, ge=1)
-    init_radius: float = Field(0.7, gt=0, description="the SDF starts as a sphere of this radius")
+    init_radius: float = Field(0.7, gt=0, description="the SDF starts as a sphere of this radius (init: sphere)")
+    init: Literal["sphere", "hull"] = Field(
+        "sphere", description="the SDF's start: a sphere of init_radius, or the masks' visual hull (the photos' "
+        "silhouettes carved into a voxel grid, its signed distance fitted by the SDF before the first step), "
+        "which has the holes, handles and necks a sphere lacks"
+    )
+    hull_resolution: int = Field(64, ge=8, le=256, description="voxels per side of the visual hull's grid")
+    hull_carve_views: int = Field(
+        2, ge=1, description="a voxel leaves the visual hull when this many photos see it off the object's mask: "
+        "one wrong mask does not cut the object"
+    )
+    hull_smoothing: float = Field(
+        1.0, ge=0, description="the hull's signed distance is blurred by this many voxels (its facets and steps "
+        "would become bumps)"
+    )
+    hull_fit_steps: int = Field(300, ge=1, description="steps of fitting the SDF to the visual hull")
+    hull_fit_batch: int = Field(8192, ge=64, description="points per step of that fit")
     hash_grid: HashGridConfig = Field(default_factory=HashGridConfig)
     texture_grid: TextureGridConfig = Field(default_factory=TextureGridConfig)
     levels_start: int = Field(4, ge=1, description="coarse-to-fine: hash-grid levels active at the start")

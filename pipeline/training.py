@@ -119,6 +119,8 @@ def train(data, model, cfg: TrainConfig, ckpt_dir: Path, *, restart: bool = Fals
             existing = []
     resume = resumable_checkpoint(existing, cfg.iterations)
     ckpt_dir.mkdir(parents=True, exist_ok=True)
+    if resume is None and cfg.sdf.init == "hull":
+        start_from_hull(model, data, cfg)
     if resume is not None:
         state = state if resume == existing[-1] else load_checkpoint(resume)
         load_weights(model, state, resume)
@@ -205,6 +207,33 @@ def train(data, model, cfg: TrainConfig, ckpt_dir: Path, *, restart: bool = Fals
     log.info("train: steps %d-%d in %.1f s (%.2f it/s)", first_step, step, seconds,
              (step - first_step) / max(seconds, 1e-9))
     return Training(step, seconds, seconds_before + seconds, {k: float(v) for k, v in terms.items()})
+
+
+def start_from_hull(model, data, cfg: TrainConfig) -> None:
+    """Fit ``model``'s SDF to the visual hull of ``data``'s masks and cameras (``train.sdf.init: hull``), at the
+    hash-grid levels the first step trains with.
+
+    Raises:
+        InputError: the masks carve the whole grid away (or leave all of it): they and the cameras disagree.
+    """
+    import torch
+
+    from orca.initialization import fit_sdf, signed_distance, visual_hull
+
+    sdf, field = cfg.sdf, model.sdf_field
+    started = time.time()
+    model.apply_schedule(0.0)
+    hull = visual_hull(data.masks, data.K, data.c2w, sdf.hull_resolution, field.spec.bound, sdf.hull_carve_views)
+    try:
+        target = signed_distance(hull, field.spec.bound, sdf.hull_smoothing)
+    except ValueError as e:
+        raise InputError(f"the training masks' visual hull has no surface ({e}): the masks and the cameras disagree",
+                         fix="check the masks stage's report (views framed in red), or set "
+                         "train.sdf.init=sphere") from None
+    generator = torch.Generator().manual_seed(cfg.seed)
+    loss = fit_sdf(field, target, field.spec.bound, sdf.hull_fit_steps, sdf.hull_fit_batch, cfg.lr, generator)
+    log.info("the SDF starts from the masks' visual hull (%d of %d^3 voxels; fit to %.4f mean |error| in %.1f s)",
+             int(hull.sum()), sdf.hull_resolution, loss, time.time() - started)
 
 
 def preview_grid(model, images, K, c2w, downscale: int) -> np.ndarray:

@@ -328,3 +328,48 @@ def test_a_minute_of_training_learns_the_blobs_shape_and_lowers_the_loss(blob, t
     assert iou > 0.9 and iou > initial_iou + 0.1
     # measured: 25.4 -> 13.7 deg, IoU 0.78 -> 0.95, mask loss x0.37, photometric x0.32; random normals: ~90 deg
     assert normals < 20.0 and normals < 0.7 * initial_normals
+
+
+def zero_set_iou(model, data) -> float:
+    """Mean IoU over the views of the pixels whose ray crosses the SDF's zero level (128 samples through the
+    object's sphere) and the masks: the shape's silhouettes, whatever the density's sharpness β."""
+    from orca.rays import camera_rays
+
+    n, h, w = data.shape
+    cols, rows = torch.meshgrid(torch.arange(w) + 0.5, torch.arange(h) + 0.5, indexing="xy")
+    uv = torch.stack([cols, rows], -1).reshape(-1, 2)
+    radius = model.spec.render.object_radius
+    ious = []
+    for i in range(n):
+        origins, dirs, _ = camera_rays(uv, data.K[i], data.c2w[i])
+        centre = -(origins * dirs).sum(-1)  # the distance along each ray nearest the object's centre
+        t = centre[:, None] + torch.linspace(-radius, radius, 128)[None]
+        with torch.no_grad():
+            sdf = model.sdf_field.sdf((origins[:, None] + t[..., None] * dirs[:, None]).reshape(-1, 3))
+        hit = (sdf.reshape(len(uv), -1).min(-1).values < 0).reshape(h, w).numpy()
+        ious.append(iou(hit, data.masks[i].numpy()))
+    return float(np.mean(ious))
+
+
+def test_the_visual_hull_start_has_the_blobs_silhouettes_before_any_step(blob):
+    """train.sdf.init=hull: before any step the SDF fitted to the masks' visual hull has the silhouettes and far
+    better normals than the sphere start."""
+    from orca.model import OrcaModel
+    from pipeline.training import start_from_hull
+
+    capture, decode = blob
+    gt = capture / "ground_truth"
+    cfg = load_config(preset="fast", overrides=[*QUICK, "train.sdf.init=hull"]).train
+    data, _ = load_image_set(decode, gt / "cameras.json", gt / "masks")
+    torch.manual_seed(cfg.seed)
+    sphere = OrcaModel(model_spec(cfg)).eval()
+    sphere_normals, _ = shape_errors(sphere, capture, decode)
+    torch.manual_seed(cfg.seed)
+    model = OrcaModel(model_spec(cfg))
+    start_from_hull(model, data, cfg)
+    normals, _ = shape_errors(model.eval(), capture, decode)
+    sphere_iou, hull_iou = zero_set_iou(sphere, data), zero_set_iou(model, data)
+    print(f"sphere start: {sphere_normals:.1f} deg, silhouette IoU {sphere_iou:.3f}; "
+          f"hull start: {normals:.1f} deg, IoU {hull_iou:.3f}")
+    assert hull_iou > 0.9 and hull_iou > sphere_iou + 0.1
+    assert normals < 0.6 * sphere_normals
