@@ -461,9 +461,10 @@ class SDFConfig(StrictModel):
     layers: int = Field(2, ge=1)
     init_radius: float = Field(0.7, gt=0, description="the SDF starts as a sphere of this radius (init: sphere)")
     init: Literal["sphere", "hull"] = Field(
-        "sphere", description="the SDF's start: a sphere of init_radius, or the masks' visual hull (the photos' "
-        "silhouettes carved into a voxel grid, its signed distance fitted by the SDF before the first step), "
-        "which has the holes, handles and necks a sphere lacks"
+        "hull", description="the SDF's start: the masks' visual hull (the photos' silhouettes carved into a voxel "
+        "grid, its signed distance fitted by the SDF before the first step), which has the holes, handles and "
+        "necks a sphere lacks (bench/shapes.py: normals better on all four of the family's shapes), or a sphere "
+        "of init_radius"
     )
     hull_resolution: int = Field(64, ge=8, le=256, description="voxels per side of the visual hull's grid")
     hull_carve_views: int = Field(

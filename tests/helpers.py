@@ -25,12 +25,15 @@ TESTDATA = ROOT.parent / "shared" / "testdata"
 # --------------------------------------------------------------------------------------------- configurations
 
 # A few steps of a very small model: what is tested is the bookkeeping, not the quality.
+# The visual hull's start at the size of the tests' other shrunk settings.
+TINY_HULL = ["train.sdf.hull_fit_steps=20", "train.sdf.hull_fit_batch=1024", "train.sdf.hull_resolution=32"]
+
 TINY_TRAIN = [
     "train.iterations=6", "train.batch_rays=64", "train.mask_warmup=2", "train.logging.checkpoint_every=2",
     "train.logging.preview_every=6", "train.logging.preview_downscale=4", "train.logging.log_every=1",
     "train.render.n_coarse=8", "train.render.n_fine=4", "train.render.env_samples=6", "train.sdf.hash_grid.levels=4",
     "train.sdf.hash_grid.log2_table_size=10", "train.environment.hash_grid.log2_table_size=10", "train.sdf.hidden=16",
-    "train.environment.hidden=16", "train.device=cpu",
+    "train.environment.hidden=16", "train.device=cpu", *TINY_HULL,
 ]
 
 # The whole DAG on the tiny capture: a few training steps, mesh and export as small as they go (the DAG and
@@ -43,6 +46,7 @@ TINY_DAG = [
     "train.environment.hash_grid.log2_table_size=10", "train.sdf.hidden=16", "train.environment.hidden=16",
     "mesh.resolution=32", "export.view_size=8", "export.panorama_width=16", "export.video_frames=2",
     "export.video_width=16", "export.video_height=12", "export.object_views=1", "export.object_downscale=4",
+    *TINY_HULL,
 ]
 
 # The network of write_untrained_train_dir: seconds to build.
