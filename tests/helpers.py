@@ -24,9 +24,10 @@ TESTDATA = ROOT.parent / "shared" / "testdata"
 
 # --------------------------------------------------------------------------------------------- configurations
 
-# A few steps of a very small model: what is tested is the bookkeeping, not the quality.
 # The visual hull's start at the size of the tests' other shrunk settings.
 TINY_HULL = ["train.sdf.hull_fit_steps=20", "train.sdf.hull_fit_batch=1024", "train.sdf.hull_resolution=32"]
+
+# A few steps of a very small model: what is tested is the bookkeeping, not the quality.
 
 TINY_TRAIN = [
     "train.iterations=6", "train.batch_rays=64", "train.mask_warmup=2", "train.logging.checkpoint_every=2",
