@@ -152,13 +152,16 @@ def test_missing_masks_are_named(tiny_capture, tiny_decode, tmp_path):
 
 def test_training_lowers_the_loss_on_the_tiny_capture(tiny_capture, tiny_decode, tmp_path):
     gt = tiny_capture / "ground_truth"
-    out = tmp_path / "train"
-    cfg = _cfg("train.iterations=40", "train.mask_warmup=20", "train.logging.checkpoint_every=40",
-               "train.logging.preview_every=40")
-    run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, cfg)
-    rows = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
-    mask = np.array([r["mask"] for r in rows])
-    assert mask[15:20].mean() < 0.7 * mask[:5].mean(), "the silhouette warm-up lowers the mask loss"
+    steps = ("train.iterations=40", "train.mask_warmup=20", "train.logging.checkpoint_every=40",
+             "train.logging.preview_every=40")
+    mask = {}
+    for start in ("sphere", "hull"):
+        out = tmp_path / start
+        run_train(tiny_decode, gt / "cameras.json", gt / "masks", out, _cfg(*steps, f"train.sdf.init={start}"))
+        rows = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
+        mask[start] = np.array([r["mask"] for r in rows])
+    assert mask["sphere"][15:20].mean() < 0.7 * mask["sphere"][:5].mean(), "the silhouette warm-up lowers the mask loss"
+    assert mask["hull"][:5].mean() < 0.3 * mask["sphere"][:5].mean(), "the visual hull starts with the silhouettes"
 
 
 def test_a_learned_appearance_is_reported_per_photo_and_loads_with_the_model(tiny_capture, tiny_decode, tmp_path):
