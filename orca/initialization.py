@@ -21,11 +21,12 @@ def grid_points(resolution: int, bound: float) -> torch.Tensor:
 
 
 def visual_hull(masks: torch.Tensor, K: torch.Tensor, c2w: torch.Tensor, resolution: int, bound: float,
-                carve_views: int) -> torch.Tensor:
+                carve_share: float, carve_min: int = 2) -> torch.Tensor:
     """``(R, R, R)`` bool: the voxels of the unit ball inside the masks' visual hull.
 
-    A voxel is cut when at least ``carve_views`` photos see it (in front of the camera, inside the frame) off
-    the object's mask, so one wrong mask does not cut the object; a voxel no photo sees is cut too.
+    A voxel is cut when the photos that see it (in front of the camera, inside the frame) off the object's
+    mask are at least ``carve_share`` of those that see it, and at least ``carve_min``: a few wrong masks (a
+    prop in front of the object, a rim missed) do not cut the object. A voxel no photo sees is cut too.
 
     Args:
         masks: ``(N, H, W)`` bool object masks; K: ``(N, 3, 3)``; c2w: ``(N, 4, 4)`` camera-to-world (OpenCV).
@@ -47,7 +48,8 @@ def visual_hull(masks: torch.Tensor, K: torch.Tensor, c2w: torch.Tensor, resolut
         on_object[inside] = masks[i, row[inside], col[inside]]
         seen += inside.int()
         off += (inside & ~on_object).int()
-    hull = (seen > 0) & (off < carve_views) & (points.norm(dim=-1) < 1.0)
+    needed = (carve_share * seen).ceil().clamp_min(carve_min)
+    hull = (seen > 0) & (off < needed) & (points.norm(dim=-1) < 1.0)
     return hull.reshape((resolution,) * 3)
 
 

@@ -467,9 +467,10 @@ class SDFConfig(StrictModel):
         "of init_radius"
     )
     hull_resolution: int = Field(64, ge=8, le=256, description="voxels per side of the visual hull's grid")
-    hull_carve_views: int = Field(
-        2, ge=1, description="a voxel leaves the visual hull when this many photos see it off the object's mask: "
-        "one wrong mask does not cut the object"
+    hull_carve_share: float = Field(
+        0.1, gt=0, le=1, description="a voxel leaves the visual hull when this share of the photos that see it (and "
+        "at least 2) see it off the object's mask: a few wrong masks (a prop in front, a rim missed) do not cut "
+        "the object (docs/method.md)"
     )
     hull_smoothing: float = Field(
         1.0, ge=0, description="the hull's signed distance is blurred by this many voxels (its facets and steps "

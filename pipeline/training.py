@@ -223,7 +223,8 @@ def start_from_hull(model, data, cfg: TrainConfig) -> None:
     sdf, field = cfg.sdf, model.sdf_field
     started = time.time()
     model.apply_schedule(0.0)
-    hull = visual_hull(data.masks, data.K, data.c2w, sdf.hull_resolution, field.spec.bound, sdf.hull_carve_views)
+    hull = visual_hull(data.masks, data.K, data.c2w, sdf.hull_resolution, field.spec.bound,
+                       sdf.hull_carve_share)
     try:
         target = signed_distance(hull, field.spec.bound, sdf.hull_smoothing)
     except ValueError as e:
