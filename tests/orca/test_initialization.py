@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from helpers import orbit_cameras
 
 from orca.encoding import HashGridSpec
 from orca.fields import SDFField, SDFFieldSpec
 from orca.initialization import fit_sdf, sample_grid, signed_distance, visual_hull
 from orca.rays import camera_rays
-from tests.helpers import orbit_cameras
 
 MAJOR, MINOR = 0.5, 0.18  # a torus lying flat (axis z): its hole is 0.32 across from its centre to the tube
 
