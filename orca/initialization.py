@@ -21,16 +21,21 @@ def grid_points(resolution: int, bound: float) -> torch.Tensor:
 
 
 def visual_hull(masks: torch.Tensor, K: torch.Tensor, c2w: torch.Tensor, resolution: int, bound: float,
-                carve_share: float, carve_min: int = 2) -> torch.Tensor:
+                carve_share: float, carve_min: int = 2, floor: tuple[torch.Tensor, float] | None = None
+                ) -> torch.Tensor:
     """``(R, R, R)`` bool: the voxels of the unit ball inside the masks' visual hull.
 
     A voxel is cut when the photos that see it (in front of the camera, inside the frame) off the object's
     mask are at least ``carve_share`` of those that see it, and at least ``carve_min``: a few wrong masks (a
     prop in front of the object, a rim missed) do not cut the object. A voxel no photo sees is cut too.
 
+    An object standing on a floor hides the space under it from every photo: each ray through it meets the
+    object first, so its mask keeps it. ``floor`` cuts that space: voxels with ``normal . x < offset``.
+
     Args:
         masks: ``(N, H, W)`` bool object masks; K: ``(N, 3, 3)``; c2w: ``(N, 4, 4)`` camera-to-world (OpenCV).
         resolution: voxels per side of the grid over ``[-bound, bound]^3``.
+        floor: ``((3,) unit normal pointing up, offset)``, or None.
     """
     n, h, w = masks.shape
     points = grid_points(resolution, bound).reshape(-1, 3).to(K.device)
@@ -50,6 +55,9 @@ def visual_hull(masks: torch.Tensor, K: torch.Tensor, c2w: torch.Tensor, resolut
         off += (inside & ~on_object).int()
     needed = (carve_share * seen).ceil().clamp_min(carve_min)
     hull = (seen > 0) & (off < needed) & (points.norm(dim=-1) < 1.0)
+    if floor is not None:
+        normal, offset = floor
+        hull &= points @ normal.to(points) >= offset
     return hull.reshape((resolution,) * 3)
 
 

@@ -476,6 +476,11 @@ class SDFConfig(StrictModel):
         1.0, ge=0, description="the hull's signed distance is blurred by this many voxels (its facets and steps "
         "would become bumps)"
     )
+    hull_floor_clearance: float = Field(
+        0.02, ge=0, description="the hull is cut this far (in the object sphere's radii) below the support plane the "
+        "masks stage found (masks_report.json): no photo sees under an object standing on it, so the masks keep "
+        "that space; the clearance is the plane's uncertainty (the blowtorch's carpet: +-0.02 of the masks' sphere)"
+    )
     hull_fit_steps: int = Field(300, ge=1, description="steps of fitting the SDF to the visual hull")
     hull_fit_batch: int = Field(8192, ge=64, description="points per step of that fit")
     hash_grid: HashGridConfig = Field(default_factory=HashGridConfig)

@@ -86,10 +86,11 @@ def parameter_groups(model, cfg: TrainConfig) -> list[dict]:
 
 
 def train(data, model, cfg: TrainConfig, ckpt_dir: Path, *, restart: bool = False,
-          max_steps: int | None = None) -> Training:
+          max_steps: int | None = None, floor: tuple[np.ndarray, float] | None = None) -> Training:
     """Fit ``model`` (on its device) to ``data`` (an ``orca.data.ImageSet`` on the CPU: its hash is part of
     the checkpoints' identity) for ``cfg.iterations`` steps, or ``max_steps`` more in this call, resuming from
-    ``ckpt_dir``; ``restart`` discards the checkpoints first.
+    ``ckpt_dir``; ``restart`` discards the checkpoints first. ``floor``: the support plane (normal, offset) the
+    hull start is cut below.
 
     Raises:
         TrainingDiverged: the loss or a gradient became NaN/Inf (the last good checkpoint stays).
@@ -120,7 +121,7 @@ def train(data, model, cfg: TrainConfig, ckpt_dir: Path, *, restart: bool = Fals
     resume = resumable_checkpoint(existing, cfg.iterations)
     ckpt_dir.mkdir(parents=True, exist_ok=True)
     if resume is None and cfg.sdf.init == "hull":
-        start_from_hull(model, data, cfg)
+        start_from_hull(model, data, cfg, floor)
     if resume is not None:
         state = state if resume == existing[-1] else load_checkpoint(resume)
         load_weights(model, state, resume)
@@ -209,9 +210,10 @@ def train(data, model, cfg: TrainConfig, ckpt_dir: Path, *, restart: bool = Fals
     return Training(step, seconds, seconds_before + seconds, {k: float(v) for k, v in terms.items()})
 
 
-def start_from_hull(model, data, cfg: TrainConfig) -> None:
+def start_from_hull(model, data, cfg: TrainConfig, floor: tuple[np.ndarray, float] | None = None) -> None:
     """Fit ``model``'s SDF to the visual hull of ``data``'s masks and cameras (``train.sdf.init: hull``), at the
-    hash-grid levels the first step trains with.
+    hash-grid levels the first step trains with; cut ``train.sdf.hull_floor_clearance`` below ``floor`` (the
+    support plane: normal, offset), when given.
 
     Raises:
         InputError: the masks carve the whole grid away (or leave all of it): they and the cameras disagree.
@@ -223,8 +225,12 @@ def start_from_hull(model, data, cfg: TrainConfig) -> None:
     sdf, field = cfg.sdf, model.sdf_field
     started = time.time()
     model.apply_schedule(0.0)
+    below = None
+    if floor is not None:
+        normal = torch.as_tensor(floor[0], dtype=torch.float32, device=data.K.device)
+        below = normal, floor[1] - sdf.hull_floor_clearance
     hull = visual_hull(data.masks, data.K, data.c2w, sdf.hull_resolution, field.spec.bound,
-                       sdf.hull_carve_share)
+                       sdf.hull_carve_share, floor=below)
     try:
         target = signed_distance(hull, field.spec.bound, sdf.hull_smoothing)
     except ValueError as e:

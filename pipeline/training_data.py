@@ -9,8 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .artifacts import read_stage_json
 from .cameras import load_cameras
 from .errors import InputError
+from .layout import CAMERAS_JSON, MASKS_REPORT
 from .mask_file import read_mask
 from .results import load_decode
 from .sparse_depth import depth_observations, load_sparse_points
@@ -36,6 +38,21 @@ def posed_names(decode_dir: Path, cameras_path: Path) -> list[str]:
     """The decoded images that have a camera in ``cameras_path``, in decode's order."""
     cams = load_cameras(cameras_path).by_name()
     return [n for n in load_decode(decode_dir).names if n in cams]
+
+
+def support_plane(masks_dir: Path, cameras_path: Path) -> tuple[np.ndarray, float] | None:
+    """The floor or table the object stands on, ``((3,) normal pointing up, offset)`` with ``normal . x =
+    offset`` on it, in the frame of ``cameras_path``: the masks stage's plane when ``masks_dir`` is that stage's
+    ``masks/`` folder and ``cameras_path`` its cameras.json; else (ground-truth or your own masks and cameras,
+    no plane found) None."""
+    stage = Path(masks_dir).parent
+    report_path = stage / MASKS_REPORT
+    if not report_path.is_file() or Path(cameras_path).resolve() != (stage / CAMERAS_JSON).resolve():
+        return None
+    plane = (read_stage_json(report_path, "masks").get("support_plane") or {}).get("cameras_json")
+    if plane is None:
+        return None
+    return np.asarray(plane["normal"], dtype=np.float64), float(plane["offset"])
 
 
 def load_image_set(decode_dir: Path, cameras_path: Path, masks_dir: Path, points_dir: Path | None = None,

@@ -362,6 +362,10 @@ def _report(records: list[dict[str, Any]], agreement: list[float], sphere: tuple
         "support_plane": None if plane is None else {
             "normal": plane.normal.tolist(), "offset": plane.offset,
             "explained_fraction": plane.consistent_fraction, "frame": "poses",
+            # training reads this one (its hull start is cut below it)
+            "cameras_json": {"normal": plane.normal.tolist(),
+                             "offset": float((plane.offset - plane.normal @ centre) / radius)
+                             if config.renormalize else plane.offset},
         },
         "rounds": rounds,
         "work_scale": scale,

@@ -44,7 +44,7 @@ from ..layout import (
 from ..model_io import appearance_record, model_spec, resolve_device, save_model
 from ..provenance import FORCE_HELP, common_capture
 from ..training import train, with_far_from_points
-from ..training_data import held_out, learns_appearance, load_image_set, posed_names
+from ..training_data import held_out, learns_appearance, load_image_set, posed_names, support_plane
 
 log = logging.getLogger("orca.train")
 
@@ -112,7 +112,10 @@ def run_train(
     if appearance:
         log.info("train: learning each photo's exposure and white balance (train.appearance %s)", cfg.appearance)
     model = OrcaModel(model_spec(cfg, photos=len(names) if appearance else 0)).to(device)
-    run = train(data, model, cfg, ckpt_dir, restart=restart, max_steps=max_steps)
+    floor = support_plane(masks_dir, cameras_path)
+    if floor is not None and cfg.sdf.init == "hull":
+        log.info("train: the visual hull start is cut below the masks stage's support plane")
+    run = train(data, model, cfg, ckpt_dir, restart=restart, max_steps=max_steps, floor=floor)
     if run.step < cfg.iterations:
         return None
 

@@ -65,6 +65,22 @@ def test_visual_hull_keeps_the_torus_and_carves_its_hole(torus_views):
     assert robust[inside].all() and not robust[hole].any()
 
 
+def test_floor_cuts_the_space_no_photo_sees_under_the_object(torus_views):
+    """Seen only from 65 degrees up, every ray through the space under the tube meets the tube first: the masks
+    keep that space. Standing on a floor at the tube's bottom, the floor cuts it and nothing of the torus."""
+    masks, K, c2w = (t[12:] for t in torus_views)
+    res, bound = 48, 1.0
+    ax = (torch.arange(res) + 0.5) / res * 2 - 1
+    x = torch.stack(torch.meshgrid(ax, ax, ax, indexing="ij"), -1).reshape(-1, 3)
+    under = ((x[:, :2].norm(dim=-1) - MAJOR).abs() < 0.05) & (x[:, 2] < -MINOR - 0.08) & (x[:, 2] > -MINOR - 0.2)
+    inside = torus_sdf(x) < -0.07
+    free = visual_hull(masks, K, c2w, res, bound, carve_share=0.2).reshape(-1)
+    assert free[under].float().mean() > 0.9 and free[inside].all()
+    floor = (torch.tensor([0.0, 0.0, 1.0]), -MINOR)
+    cut = visual_hull(masks, K, c2w, res, bound, carve_share=0.2, floor=floor).reshape(-1)
+    assert not cut[x[:, 2] < -MINOR].any() and cut[inside].all()
+
+
 def test_signed_distance_of_a_voxelized_ball():
     res, bound, radius = 40, 1.0, 0.5
     ax = (torch.arange(res) + 0.5) / res * 2 - 1

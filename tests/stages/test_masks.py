@@ -22,6 +22,7 @@ from pipeline.metrics import iou
 from pipeline.results import load_decode, load_masks
 from pipeline.stages.masks import run_masks
 from pipeline.stages.poses import run_poses
+from pipeline.training_data import support_plane
 from pipeline.transforms import to_transforms
 from pipeline.undistort import recorded_undistortion
 
@@ -182,6 +183,13 @@ def test_automatic_masks_of_the_sphere_with_two_corrections(sfm_sphere_capture, 
     assert result.sphere_radius < 0.8
     report = load_masks(tmp_path / "masks").report  # the floor was found: no warning about it
     assert report["support_plane"] is not None and not any("no support plane" in w for w in report["warnings"])
+    # the floor in the training frame (the object's sphere is the unit sphere): the sphere stands on it, its
+    # centre 1 / sphere_margin of that sphere above it; its own cameras only are in that frame
+    masks_dir = tmp_path / "masks" / "masks"
+    normal, offset = support_plane(masks_dir, tmp_path / "masks" / "cameras.json")
+    print("support plane in the training frame", normal, offset)
+    assert 0.8 < -offset < 1.1
+    assert support_plane(masks_dir, sfm_sphere_capture / "ground_truth" / "cameras.json") is None
     # the known cameras' triangulated points seeded the masks: the floor's as background
     sparse = report["sparse_points"]
     print("sparse points", sparse["points"], sparse["labels"])
