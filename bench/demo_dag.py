@@ -45,13 +45,20 @@ def run(cmd: list[str], cwd: Path, log: Path, env: dict[str, str] | None = None)
     return time.perf_counter() - t0
 
 
+def object_figures(evaluate: dict[str, Any]) -> dict[str, float | None]:
+    """The object's figures of merit in an evaluate.json: normals, mask, PSNRs and the mesh's distances."""
+    obj, mesh = evaluate["object"]["mean"], evaluate.get("mesh") or {}
+    return {"normals_deg": obj.get("normal_mae_deg"), "mask_iou": obj.get("mask_iou"),
+            "psnr_combined_db": obj.get("psnr_rgb"), "psnr_combined_srgb_db": obj.get("psnr_srgb_rgb"),
+            "psnr_diffuse_db": obj.get("psnr_diffuse"), "psnr_specular_db": obj.get("psnr_specular"),
+            "chamfer_fraction": mesh.get("chamfer_fraction"), "hausdorff_fraction": mesh.get("hausdorff_fraction")}
+
+
 def quality(results: Path) -> dict[str, float | None]:
     """The demo's figures of merit from evaluate.json (the issue's quality bar)."""
     evaluate = json.loads((results / "evaluate" / "evaluate.json").read_text(encoding="utf-8"))
-    obj, env = evaluate["object"]["mean"], evaluate["environment"]["mean"]
-    return {"normals_deg": obj.get("normal_mae_deg"), "mask_iou": obj.get("mask_iou"),
-            "psnr_combined_db": obj.get("psnr_rgb"), "psnr_combined_srgb_db": obj.get("psnr_srgb_rgb"),
-            "psnr_specular_db": obj.get("psnr_specular"), "env_psnr_db": env.get("psnr"),
+    env = evaluate["environment"]["mean"]
+    return {**object_figures(evaluate), "env_psnr_db": env.get("psnr"),
             "env_depth_absrel_props": env.get("prop_depth_absrel")}
 
 

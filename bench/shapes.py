@@ -25,6 +25,7 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: bench.blowtorch
 
 from bench.blowtorch import ORCA, commit, machine, timed  # noqa: E402
+from bench.demo_dag import object_figures  # noqa: E402
 from pipeline.layout import MESH_FIGURE  # noqa: E402
 from pipeline.synth.family import traits  # noqa: E402
 from pipeline.synth.scenes import get_scene  # noqa: E402
@@ -39,11 +40,8 @@ SCENES = ("random-32", "random-27", "random-4", "random-0")
 def scene_figures(results: Path) -> dict[str, Any]:
     """The object's figures of merit from evaluate.json."""
     evaluate = json.loads((results / "evaluate" / "evaluate.json").read_text(encoding="utf-8"))
-    obj, mesh = evaluate["object"]["mean"], evaluate.get("mesh") or {}
-    return {"normals_deg": obj.get("normal_mae_deg"), "mask_iou": obj.get("mask_iou"),
-            "psnr_combined_db": obj.get("psnr_rgb"), "psnr_diffuse_db": obj.get("psnr_diffuse"),
-            "psnr_specular_db": obj.get("psnr_specular"), "chamfer_fraction": mesh.get("chamfer_fraction"),
-            "fscores": {k: v for k, v in mesh.items() if k.startswith("fscore_")}}
+    mesh = evaluate.get("mesh") or {}
+    return {**object_figures(evaluate), "fscores": {k: v for k, v in mesh.items() if k.startswith("fscore_")}}
 
 
 def run_scene(scene: str, work: Path, preset: str, sets: list[str]) -> dict[str, Any]:
