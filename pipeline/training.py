@@ -225,10 +225,7 @@ def start_from_hull(model, data, cfg: TrainConfig, floor: tuple[np.ndarray, floa
     sdf, field = cfg.sdf, model.sdf_field
     started = time.time()
     model.apply_schedule(0.0)
-    below = None
-    if floor is not None:
-        normal = torch.as_tensor(floor[0], dtype=torch.float32, device=data.K.device)
-        below = normal, floor[1] - sdf.hull_floor_clearance
+    below = (torch.as_tensor(floor[0]), floor[1] - sdf.hull_floor_clearance) if floor is not None else None
     hull = visual_hull(data.masks, data.K, data.c2w, sdf.hull_resolution, field.spec.bound,
                        sdf.hull_carve_share, floor=below)
     try:

@@ -9,12 +9,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .artifacts import read_stage_json
 from .cameras import load_cameras
 from .errors import InputError
 from .layout import CAMERAS_JSON, MASKS_REPORT
 from .mask_file import read_mask
-from .results import load_decode
+from .results import load_decode, load_masks
 from .sparse_depth import depth_observations, load_sparse_points
 
 log = logging.getLogger("orca.train")
@@ -46,10 +45,9 @@ def support_plane(masks_dir: Path, cameras_path: Path) -> tuple[np.ndarray, floa
     ``masks/`` folder and ``cameras_path`` its cameras.json; else (ground-truth or your own masks and cameras,
     no plane found) None."""
     stage = Path(masks_dir).parent
-    report_path = stage / MASKS_REPORT
-    if not report_path.is_file() or Path(cameras_path).resolve() != (stage / CAMERAS_JSON).resolve():
+    if not (stage / MASKS_REPORT).is_file() or Path(cameras_path).resolve() != (stage / CAMERAS_JSON).resolve():
         return None
-    plane = (read_stage_json(report_path, "masks").get("support_plane") or {}).get("cameras_json")
+    plane = (load_masks(stage).report.get("support_plane") or {}).get("cameras_json")
     if plane is None:
         return None
     return np.asarray(plane["normal"], dtype=np.float64), float(plane["offset"])
