@@ -53,7 +53,8 @@ def _released(occluded: np.ndarray | None, front: np.ndarray | None, through: np
 
 
 def vote_weights(views: Sequence[View], backgrounds: Sequence[np.ndarray], floors: Sequence[np.ndarray | None],
-                 fixed: dict[int, np.ndarray], opts: SegmentOptions) -> list[np.ndarray | None]:
+                 fixed: dict[int, np.ndarray], opts: SegmentOptions,
+                 unexplained: Sequence[np.ndarray | None] | None = None) -> list[np.ndarray | None]:
     """Per view, ``(H, W)`` float32 what a background vote counts in :func:`carve` (None: 1 everywhere).
     ``doubtful_vote`` on dark pixels (brightest channel <= ``dark_level``) that no evidence confirms as background
     (outside the sphere, swept, floor): a dark object bottom and its dark contact shadow look alike, and views
@@ -68,7 +69,37 @@ def vote_weights(views: Sequence[View], backgrounds: Sequence[np.ndarray], floor
         if floors[i] is not None:
             sure = sure | floors[i]
         weight[~sure] = opts.doubtful_vote
+        if unexplained is not None and unexplained[i] is not None:
+            weight[unexplained[i]] = opts.unexplained_vote
         out.append(weight)
+    return out
+
+
+def unexplained_pixels(evidence: Evidence, opts: SegmentOptions) -> list[np.ndarray | None] | None:
+    """Per view, ``(H, W)`` bool: pixels in the sphere's image that no background explains -- the support plane
+    clearly does not, no surface outside the sphere does (textured: a flat patch is explained by anything) --
+    so something inside the sphere is seen there: the object, or a prop standing in it. A mirror-like part
+    reflects the room and GrabCut gives it to the background in every view, but no background surface explains
+    a reflection. None when the capture's background is not explained well enough for this to mean anything:
+    the median view's likely background (in the sphere's image, outside the first masks) is unexplained in
+    more than ``unexplained_max_rate`` of its pixels (a real carpet's weave matches no plane by colour)."""
+    if not evidence.above or all(a is None for a in evidence.above):
+        return None
+    out, rates = [], []
+    for above, background, floor, sphere, first in zip(evidence.above, evidence.backgrounds, evidence.floors,
+                                                        evidence.spheres, evidence.masks):
+        if above is None:
+            out.append(None)
+            continue
+        found = above & ~background & (~floor if floor is not None else True)
+        likely_background = (sphere < 1.0) & ~background & ~first
+        rates.append(np.count_nonzero(found & likely_background) / max(1, np.count_nonzero(likely_background)))
+        out.append(found)
+    rate = float(np.median(rates))
+    if rate > opts.unexplained_max_rate:
+        log.info("the background is unexplained in %.0f %% of its pixels (median view): no object evidence from "
+                 "unexplained pixels", 100 * rate)
+        return None
     return out
 
 
@@ -226,6 +257,7 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
     masks = list(evidence.masks)
     near = neighbours(views, opts.sweep_neighbours, opts.neighbour_max_deg)
     around = spread(views, opts.through_views)
+    unexplained = unexplained_pixels(evidence, opts)
     points, index = hull_grid(opts.hull_resolution, plane)
     rounds: list[dict[str, float]] = []
     hulls: list[np.ndarray] = []
@@ -233,7 +265,7 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
     through: list[np.ndarray | None] = [None] * n
     fronts: list[np.ndarray | None] = [None] * n
     for r in range(opts.rounds):
-        weights = vote_weights(views, backgrounds, floors, fixed, opts)
+        weights = vote_weights(views, backgrounds, floors, fixed, opts, unexplained)
         volume = carve(masks, views, points, index, opts.hull_resolution, weights)
         votes = carve_votes(opts, n)
         depths = [hull_depth(volume, v, votes - 0.5) for v in views]
@@ -265,7 +297,7 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
             else:
                 seeds = hull_seeds(hulls[i], _released(occluded[i], fronts[i], through[i], opts), backgrounds[i],
                                    floors[i], opts.core_erode_px, opts.band_px, v.clipped, evidence.objects[i],
-                                   opts.core_fraction if r < opts.rounds - 1 else 0.0)
+                                   opts.core_fraction if r < opts.rounds - 1 else opts.final_core_fraction)
                 new.append(grabcut(v.image, seeds, opts.grabcut_iterations))
             step("segment")
         agreement = [iou(a, b) for a, b in zip(new, hulls)]

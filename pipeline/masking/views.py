@@ -55,6 +55,7 @@ class SegmentOptions:
     carve_share: float = 0.2
     core_erode_px: int = 3
     core_fraction: float = 0.2
+    final_core_fraction: float = 0.0
     band_px: int = 4
     neighbours: int = 6
     neighbour_max_deg: float = 60.0
@@ -80,6 +81,8 @@ class SegmentOptions:
     sweep_far: float = 4.0
     seed_radius: float = 0.3
     doubtful_vote: float = 0.5
+    unexplained_vote: float = 1.0
+    unexplained_max_rate: float = 1.0
     dark_level: int = 48
     final_reach_px: int = 1
     final_max_core_lost: float = 0.15
