@@ -259,13 +259,29 @@ class MasksConfig(StrictModel):
         "the hull's reprojection farther from its outline than this share of its deepest pixel's distance; the "
         "rest is probable object, for colour to decide. Forced, a hull fattened by loose first masks keeps its "
         "wedges of floor and wall in every round (the blowtorch: 0.795 median IoU at 0, 0.850 at 0.2). The last "
-        "round forces the whole core (but a 3 px rim) again, so a glossy rim that mirrors the room stays; 0: "
-        "every round forces it"
+        "round's share is final_core_fraction; 0: every round forces the whole core"
+    )
+    final_core_fraction: float = Field(
+        0.0, ge=0, lt=1, description="core_fraction in the last round (0: the whole core but a 3 px rim is forced, "
+        "so a glossy rim that mirrors the room stays; higher: colour trims more of a hull that a ring of low "
+        "views leaves fat beside the object)"
     )
     seed_radius: float = Field(
         0.3, ge=0, lt=1, description="before any hull, the central part of the unit sphere's image (this fraction of "
         "its radius) is taken as object: the cameras converge on it (of the first sphere's radius when the "
         "sphere prior grows)"
+    )
+    unexplained_vote: float = Field(
+        1.0, ge=0, le=1, description="a background vote counts this much where no background explains the pixel (the "
+        "support plane clearly does not, no surface outside the sphere does): something in the sphere is seen "
+        "there, like a mirror-like neck that reflects the room and that colour loses in every view. 1: off (the "
+        "default; 0 keeps such parts, but also a prop, a table or a contact shadow the support plane does not "
+        "explain)"
+    )
+    unexplained_max_rate: float = Field(
+        0.4, ge=0, le=1, description="unexplained pixels count (unexplained_vote) only in a capture whose likely "
+        "background (the sphere's image outside the first masks) is unexplained in at most this share of its "
+        "pixels, median view: elsewhere (a real carpet's weave matches no plane by colour) they mean nothing"
     )
     doubtful_vote: float = Field(
         0.5, ge=0, le=1, description="a background vote counts this much where the view's pixel is dark (see "

@@ -86,23 +86,34 @@ def framed_options(opts: SegmentOptions, radius: float) -> SegmentOptions:
     return replace(opts, seed_radius=opts.seed_radius / radius)
 
 
+def outgrown(prior: PriorSphere, masks: Sequence[np.ndarray], framed: Sequence[View], opts: SegmentOptions,
+             by: str = "probe") -> tuple[PriorSphere, PriorSphere | None]:
+    """Whether ``masks`` (of the views ``framed`` in ``prior``'s frame, where it is the unit sphere) outgrow the
+    sphere: ``prior`` with their record added to its probes, and the grown sphere to segment in again (None when
+    they reach its outline in at most ``prior_touch_share`` of the views, or it may not grow further). ``by``:
+    what made the masks, for the record."""
+    touching = touching_views(masks, framed)
+    probes = [*prior.probes, {"radius": prior.radius, "centre": prior.centre.tolist(), "touching_views": touching,
+                              "by": by}]
+    log.info("sphere prior radius %.2f: the %s's masks reach its outline in %d of %d views", prior.radius, by,
+             touching, len(framed))
+    recorded = replace(prior, probes=probes)
+    if touching <= opts.prior_touch_share * len(framed) or prior.radius >= opts.prior_max_growth:
+        return recorded, None
+    step, factor = grown(masks, framed, min(opts.prior_growth, opts.prior_max_growth / prior.radius))
+    return recorded, PriorSphere(prior.centre + prior.radius * step, prior.radius * factor, probes)
+
+
 def find_prior_sphere(views: Sequence[View], opts: SegmentOptions,
                       segment: Callable[[Sequence[View], SegmentOptions, np.ndarray, float], list[np.ndarray]]
                       ) -> PriorSphere:
     """The sphere (frame of ``views``) that contains the object: the unit sphere, grown while the probe's masks
     reach its outline (see the module doc). ``segment``: views in the sphere's frame, options, the sphere's
     centre and radius in the frame of ``views`` -> masks (the driver)."""
-    centre, radius = np.zeros(3), 1.0
-    probes: list[dict[str, float]] = []
+    prior: PriorSphere | None = PriorSphere(np.zeros(3), 1.0, [])
     cheap = probe_options(opts)
-    while True:
-        framed = [in_sphere_frame(v, centre, radius) for v in views]
-        masks = segment(framed, framed_options(cheap, radius), centre, radius)
-        touching = touching_views(masks, framed)
-        probes.append({"radius": radius, "centre": centre.tolist(), "touching_views": touching})
-        log.info("sphere prior radius %.2f: the probe's masks reach its outline in %d of %d views", radius, touching,
-                 len(views))
-        if touching <= opts.prior_touch_share * len(views) or radius >= opts.prior_max_growth:
-            return PriorSphere(centre, radius, probes)
-        step, factor = grown(masks, framed, min(opts.prior_growth, opts.prior_max_growth / radius))
-        centre, radius = centre + radius * step, radius * factor
+    while prior is not None:
+        framed = [in_sphere_frame(v, prior.centre, prior.radius) for v in views]
+        masks = segment(framed, framed_options(cheap, prior.radius), prior.centre, prior.radius)
+        found, prior = outgrown(prior, masks, framed, opts)
+    return found

@@ -17,7 +17,7 @@ from .hull import OUTSIDE_VOTES, carve, carve_votes, hull_depth, hull_grid
 from .support_plane import find_support_plane, floor_evidence
 from .sweeps import floor_through_hull, front_evidence, occluded_region, occluder_evidence
 from .tracks import LABELS, Tracks, label_points, seed_maps, track_plane
-from .views import Plane, SegmentOptions, View, disc, neighbours, sphere_distance, spread
+from .views import Plane, SegmentOptions, View, disc, neighbours, pixel_rays, sphere_distance, spread
 
 log = logging.getLogger("orca.masks")
 
@@ -70,12 +70,22 @@ def vote_weights(views: Sequence[View], backgrounds: Sequence[np.ndarray], floor
             sure = sure | floors[i]
         weight[~sure] = opts.doubtful_vote
         if unexplained is not None and unexplained[i] is not None:
-            weight[unexplained[i]] = opts.unexplained_vote
+            weight[unexplained[i]] = np.minimum(weight[unexplained[i]], opts.unexplained_vote)
         out.append(weight)
     return out
 
 
-def unexplained_pixels(evidence: Evidence, opts: SegmentOptions) -> list[np.ndarray | None] | None:
+def floor_in_sphere(view: View, plane: Plane) -> np.ndarray:
+    """``(H, W)`` bool: pixels whose ray meets the support ``plane`` inside the unit sphere."""
+    o, d = view.c2w[:3, 3], pixel_rays(view)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (plane.offset - plane.normal @ o) / (d @ plane.normal)
+    p = o + d * np.where(t > 0, t, np.inf)[..., None]
+    return np.nan_to_num(np.einsum("...i,...i->...", p, p), nan=np.inf) < 1.0
+
+
+def unexplained_pixels(views: Sequence[View], evidence: Evidence, opts: SegmentOptions
+                       ) -> list[np.ndarray | None] | None:
     """Per view, ``(H, W)`` bool: pixels in the sphere's image that no background explains -- the support plane
     clearly does not, no surface outside the sphere does (textured: a flat patch is explained by anything) --
     so something inside the sphere is seen there: the object, or a prop standing in it. A mirror-like part
@@ -83,15 +93,15 @@ def unexplained_pixels(evidence: Evidence, opts: SegmentOptions) -> list[np.ndar
     a reflection. None when the capture's background is not explained well enough for this to mean anything:
     the median view's likely background (in the sphere's image, outside the first masks) is unexplained in
     more than ``unexplained_max_rate`` of its pixels (a real carpet's weave matches no plane by colour)."""
-    if not evidence.above or all(a is None for a in evidence.above):
+    if evidence.plane is None or all(a is None for a in evidence.above):
         return None
     out, rates = [], []
-    for above, background, floor, sphere, first in zip(evidence.above, evidence.backgrounds, evidence.floors,
-                                                        evidence.spheres, evidence.masks):
+    for view, above, background, floor, sphere, first in zip(views, evidence.above, evidence.backgrounds,
+                                                              evidence.floors, evidence.spheres, evidence.masks):
         if above is None:
             out.append(None)
             continue
-        found = above & ~background & (~floor if floor is not None else True)
+        found = above & ~background & (~floor if floor is not None else True) & ~floor_in_sphere(view, evidence.plane)
         likely_background = (sphere < 1.0) & ~background & ~first
         rates.append(np.count_nonzero(found & likely_background) / max(1, np.count_nonzero(likely_background)))
         out.append(found)
@@ -257,7 +267,7 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
     masks = list(evidence.masks)
     near = neighbours(views, opts.sweep_neighbours, opts.neighbour_max_deg)
     around = spread(views, opts.through_views)
-    unexplained = unexplained_pixels(evidence, opts)
+    unexplained = unexplained_pixels(views, evidence, opts)
     points, index = hull_grid(opts.hull_resolution, plane)
     rounds: list[dict[str, float]] = []
     hulls: list[np.ndarray] = []

@@ -82,7 +82,7 @@ class SegmentOptions:
     seed_radius: float = 0.3
     doubtful_vote: float = 0.5
     unexplained_vote: float = 1.0
-    unexplained_max_rate: float = 1.0
+    unexplained_max_rate: float = 0.4
     dark_level: int = 48
     final_reach_px: int = 1
     final_max_core_lost: float = 0.15

@@ -87,7 +87,14 @@ from ..layout import (
 )
 from ..log import progress
 from ..masking.hull import carve, carve_votes, hull_grid, reproject
-from ..masking.prior import PriorSphere, find_prior_sphere, framed_options, in_sphere_frame, touching_views
+from ..masking.prior import (
+    PriorSphere,
+    find_prior_sphere,
+    framed_options,
+    in_sphere_frame,
+    outgrown,
+    touching_views,
+)
 from ..masking.scale import full_size_mask, load_view, reduce
 from ..masking.segment import probe_masks, segment, segment_options
 from ..masking.tracks import tracks_for_views
@@ -190,16 +197,23 @@ def run_masks(
             views = [in_sphere_frame(v, prior.centre, prior.radius) for v in views]
         else:
             probe = bar.add_task("sphere prior", total=None)
-            prior = find_prior_sphere(views, opts, probe_masks(tracks, fixed))
+            grown: PriorSphere | None = find_prior_sphere(views, opts, probe_masks(tracks, fixed))
             bar.update(probe, total=1, completed=1)
-            views = [in_sphere_frame(v, prior.centre, prior.radius) for v in views]
             # the support plane, floor and first GrabCut per view; per round the carve, GrabCut per view and, from
             # the second, the evidence against the hull per view
             n = len(views)
             task = bar.add_task("segment", total=1 + 2 * n + opts.rounds * (1 + n) + (opts.rounds - 1) * n)
-            framed_tracks = tracks.framed(prior.centre, prior.radius) if tracks is not None else None
-            seg = segment(views, framed_options(opts, prior.radius), fixed=fixed,
-                          on_step=lambda label: bar.advance(task), tracks=framed_tracks)
+            unframed = views
+            while grown is not None:
+                prior = grown
+                bar.reset(task)
+                views = [in_sphere_frame(v, prior.centre, prior.radius) for v in unframed]
+                framed_tracks = tracks.framed(prior.centre, prior.radius) if tracks is not None else None
+                seg = segment(views, framed_options(opts, prior.radius), fixed=fixed,
+                              on_step=lambda label: bar.advance(task), tracks=framed_tracks)
+                # The probe's cheap masks can stop short of a part the full evidence keeps (a mirror-like neck that
+                # colour alone loses): when the final masks reach past the sphere it grows, and they are made again.
+                prior, grown = outgrown(prior, seg.masks, views, opts, "segmentation")
             final, plane, rounds, labelled = seg.masks, seg.plane, seg.rounds, seg.track_labels
 
         # The hull of the final masks: the views' agreement and the object's bounding sphere.
@@ -282,8 +296,8 @@ def run_masks(
             "points": None if tracks is None else len(tracks.xyz), "labels": labelled}
         report["sphere_prior"] = {
             "what": "the sphere segmentation and the hull ran in (poses frame): the poses stage's unit sphere, "
-            "grown while the probe's masks (the user's, when every view has one) reached its outline "
-            "(pipeline.masking.prior)",
+            "grown while the probe's masks (the user's, when every view has one), then the final masks, reached "
+            "its outline (pipeline.masking.prior; each probe's 'by' says which)",
             "centre": prior.centre.tolist(), "radius": prior.radius, "probes": prior.probes}
         write_json(tmp / MASKS_REPORT, report)
         inputs: dict[str, Path] = {CAMERAS_JSON: poses_dir / CAMERAS_JSON, DECODE_JSON: decoded.folder / DECODE_JSON}

@@ -10,7 +10,7 @@ import numpy as np
 from pipeline.cameras import look_at
 from pipeline.masking.grabcut import grabcut, hull_seeds
 from pipeline.masking.hull import carve, hull_depth, hull_grid, in_hull, reproject
-from pipeline.masking.prior import find_prior_sphere, in_sphere_frame
+from pipeline.masking.prior import PriorSphere, find_prior_sphere, in_sphere_frame, outgrown
 from pipeline.masking.segment import Evidence, core_lost, final_mask, unexplained_pixels, vote_weights
 from pipeline.masking.support_plane import (
     exposure_gains,
@@ -146,7 +146,8 @@ def test_doubtful_background_votes_count_less():
 
 
 def evidence_of_a_mirror_neck(views: list[View], rate: float) -> tuple[Evidence, list[np.ndarray], list[np.ndarray]]:
-    """A sphere (radius 0.45) with a neck above it (a cylinder of radius 0.12 up to z = 0.85): in every view
+    """A sphere (radius 0.45) with a neck above it (a cylinder of radius 0.12 up to z = 0.85) over the floor
+    :data:`FLOOR`: in every view
     GrabCut keeps the sphere and loses the neck (a mirror reflects the room, coloured like it), no background
     surface explains the neck, and ``rate`` of the rest of the sphere's image is unexplained too (the wrong
     matches of the room's texture). Returns the evidence, the true masks and the neck's pixels per view."""
@@ -167,7 +168,7 @@ def evidence_of_a_mirror_neck(views: list[View], rate: float) -> tuple[Evidence,
         truths.append(body | neck)
         necks.append(neck)
     n = len(views)
-    evidence = Evidence(None, spheres, [None] * n, aboves, [s >= 1.0 for s in spheres], [None] * n, firsts,
+    evidence = Evidence(FLOOR, spheres, [None] * n, aboves, [s >= 1.0 for s in spheres], [None] * n, firsts,
                         [None] * n)
     return evidence, truths, necks
 
@@ -182,7 +183,7 @@ def test_pixels_no_background_explains_keep_a_mirror_neck_that_colour_loses_in_e
     opts = SegmentOptions(unexplained_vote=0.0, unexplained_max_rate=0.3)
     for rate, kept in ((0.1, True), (0.6, False)):
         evidence, truths, necks = evidence_of_a_mirror_neck(views, rate)
-        unexplained = unexplained_pixels(evidence, opts)
+        unexplained = unexplained_pixels(views, evidence, opts)
         assert (unexplained is not None) == kept
         weights = vote_weights(views, evidence.backgrounds, evidence.floors, {}, opts, unexplained)
         volume = carve(evidence.masks, views, points, index, 64, weights)
@@ -515,6 +516,25 @@ def test_the_sphere_prior_stays_the_poses_sphere_when_the_object_is_inside():
     prior = find_prior_sphere(views, SegmentOptions(), clipped_ball_masks(np.array([0.1, 0.0, 0.0]), 0.6, views))
     assert prior.radius == 1.0 and len(prior.probes) == 1 and prior.probes[0]["touching_views"] == 0
     np.testing.assert_array_equal(prior.centre, np.zeros(3))
+
+
+def test_final_masks_that_reach_past_the_sphere_grow_it_and_masks_inside_it_do_not():
+    """What the masks stage asks of the final masks (the probe's cheap masks may stop short of a part the full
+    evidence keeps): a ball reaching 0.3 past the unit sphere grows the sphere, re-centred towards it and recorded with what made the masks; a ball inside it, or a sphere already at the growth limit,
+    does not."""
+    views = ring_views(12, size=(200, 150)) + ring_views(8, size=(200, 150), elevation_deg=50.0)
+    opts = SegmentOptions()
+    start = PriorSphere(np.zeros(3), 1.0, [{"radius": 1.0, "centre": [0.0, 0.0, 0.0], "touching_views": 0}])
+    cut = clipped_ball_masks(np.array([0.5, 0.0, 0.0]), 0.8, views)(views, opts, None, None)
+    recorded, grown = outgrown(start, cut, views, opts, "segmentation")
+    assert grown is not None and grown.radius == opts.prior_growth and grown.centre[0] > 0.05
+    assert recorded.probes[-1]["by"] == "segmentation"
+    assert recorded.probes[-1]["touching_views"] > opts.prior_touch_share * len(views)
+    assert grown.probes == recorded.probes and len(start.probes) == 1
+    inside = clipped_ball_masks(np.zeros(3), 0.6, views)(views, opts, None, None)
+    assert outgrown(start, inside, views, opts)[1] is None
+    limit = PriorSphere(np.zeros(3), opts.prior_max_growth, [])
+    assert outgrown(limit, cut, views, opts)[1] is None
 
 
 def test_a_view_in_the_sphere_frame_sees_the_sphere_as_the_unit_sphere():
