@@ -58,7 +58,8 @@ def vote_weights(views: Sequence[View], backgrounds: Sequence[np.ndarray], floor
     """Per view, ``(H, W)`` float32 what a background vote counts in :func:`carve` (None: 1 everywhere).
     ``doubtful_vote`` on dark pixels (brightest channel <= ``dark_level``) that no evidence confirms as background
     (outside the sphere, swept, floor): a dark object bottom and its dark contact shadow look alike, and views
-    from above lose the bottom by colour."""
+    from above lose the bottom by colour. At most ``unexplained_vote`` on the ``unexplained`` pixels
+    (:func:`unexplained_pixels`; None: nowhere)."""
     out: list[np.ndarray | None] = []
     for i, v in enumerate(views):
         if i in fixed:
@@ -267,7 +268,7 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
     masks = list(evidence.masks)
     near = neighbours(views, opts.sweep_neighbours, opts.neighbour_max_deg)
     around = spread(views, opts.through_views)
-    unexplained = unexplained_pixels(views, evidence, opts)
+    unexplained = unexplained_pixels(views, evidence, opts) if opts.unexplained_vote < 1.0 else None
     points, index = hull_grid(opts.hull_resolution, plane)
     rounds: list[dict[str, float]] = []
     hulls: list[np.ndarray] = []

@@ -520,8 +520,8 @@ def test_the_sphere_prior_stays_the_poses_sphere_when_the_object_is_inside():
 
 def test_final_masks_that_reach_past_the_sphere_grow_it_and_masks_inside_it_do_not():
     """What the masks stage asks of the final masks (the probe's cheap masks may stop short of a part the full
-    evidence keeps): a ball reaching 0.3 past the unit sphere grows the sphere, re-centred towards it and recorded with what made the masks; a ball inside it, or a sphere already at the growth limit,
-    does not."""
+    evidence keeps): a ball reaching 0.3 past the unit sphere grows the sphere, re-centred towards it and
+    recorded with what made the masks; a ball inside it, or a sphere already at the growth limit, does not."""
     views = ring_views(12, size=(200, 150)) + ring_views(8, size=(200, 150), elevation_deg=50.0)
     opts = SegmentOptions()
     start = PriorSphere(np.zeros(3), 1.0, [{"radius": 1.0, "centre": [0.0, 0.0, 0.0], "touching_views": 0}])
