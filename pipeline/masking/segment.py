@@ -17,7 +17,7 @@ from .hull import OUTSIDE_VOTES, carve, carve_votes, hull_depth, hull_grid
 from .support_plane import find_support_plane, floor_evidence
 from .sweeps import floor_through_hull, front_evidence, occluded_region, occluder_evidence
 from .tracks import LABELS, Tracks, label_points, seed_maps, track_plane
-from .views import Plane, SegmentOptions, View, disc, neighbours, pixel_rays, sphere_distance, spread
+from .views import Plane, SegmentOptions, View, disc, neighbours, sphere_distance, spread
 
 log = logging.getLogger("orca.masks")
 
@@ -76,19 +76,11 @@ def vote_weights(views: Sequence[View], backgrounds: Sequence[np.ndarray], floor
     return out
 
 
-def floor_in_sphere(view: View, plane: Plane) -> np.ndarray:
-    """``(H, W)`` bool: pixels whose ray meets the support ``plane`` inside the unit sphere."""
-    o, d = view.c2w[:3, 3], pixel_rays(view)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (plane.offset - plane.normal @ o) / (d @ plane.normal)
-    p = o + d * np.where(t > 0, t, np.inf)[..., None]
-    return np.nan_to_num(np.einsum("...i,...i->...", p, p), nan=np.inf) < 1.0
-
-
 def unexplained_pixels(views: Sequence[View], evidence: Evidence, opts: SegmentOptions
                        ) -> list[np.ndarray | None] | None:
-    """Per view, ``(H, W)`` bool: pixels in the sphere's image that no background explains -- the support plane
-    clearly does not, no surface outside the sphere does (textured: a flat patch is explained by anything) --
+    """Per view, ``(H, W)`` bool: pixels in the sphere's image, brighter than ``dark_level``, that no background
+    explains -- the support plane clearly does not, no surface outside the sphere does (textured: a flat patch is
+    explained by anything) --
     so something inside the sphere is seen there: the object, or a prop standing in it. A mirror-like part
     reflects the room and GrabCut gives it to the background in every view, but no background surface explains
     a reflection. None when the capture's background is not explained well enough for this to mean anything:
@@ -102,7 +94,9 @@ def unexplained_pixels(views: Sequence[View], evidence: Evidence, opts: SegmentO
         if above is None:
             out.append(None)
             continue
-        found = above & ~background & (~floor if floor is not None else True) & ~floor_in_sphere(view, evidence.plane)
+        # not dark: a contact shadow on a support the plane does not explain (a table when the plane found is the
+        # floor under it) is as unexplained as a reflection
+        found = above & ~background & (~floor if floor is not None else True) & (view.image.max(-1) > opts.dark_level)
         likely_background = (sphere < 1.0) & ~background & ~first
         rates.append(np.count_nonzero(found & likely_background) / max(1, np.count_nonzero(likely_background)))
         out.append(found)
