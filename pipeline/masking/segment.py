@@ -80,13 +80,13 @@ def unexplained_pixels(views: Sequence[View], evidence: Evidence, opts: SegmentO
                        ) -> list[np.ndarray | None] | None:
     """Per view, ``(H, W)`` bool: pixels in the sphere's image, brighter than ``dark_level``, that no background
     explains -- the support plane clearly does not, no surface outside the sphere does (textured: a flat patch is
-    explained by anything) --
-    so something inside the sphere is seen there: the object, or a prop standing in it. A mirror-like part
-    reflects the room and GrabCut gives it to the background in every view, but no background surface explains
-    a reflection. None when the capture's background is not explained well enough for this to mean anything:
-    the median view's likely background (in the sphere's image, outside the first masks) is unexplained in
-    more than ``unexplained_max_rate`` of its pixels (a real carpet's weave matches no plane by colour)."""
-    if evidence.plane is None or all(a is None for a in evidence.above):
+    explained by anything) -- so something inside the sphere is seen there: the object, or a prop standing in
+    it. A mirror-like part reflects the room and GrabCut gives it to the background in every view, but no
+    background surface explains a reflection. None without a support plane (no ``above`` evidence), or when the
+    capture's background is not explained well enough for this to mean anything: the median view's likely
+    background (in the sphere's image, outside the first masks) is unexplained in more than
+    ``unexplained_max_rate`` of its pixels (a real carpet's weave matches no plane by colour)."""
+    if all(a is None for a in evidence.above):
         return None
     out, rates = [], []
     for view, above, background, floor, sphere, first in zip(views, evidence.above, evidence.backgrounds,

@@ -147,10 +147,10 @@ def test_doubtful_background_votes_count_less():
 
 def evidence_of_a_mirror_neck(views: list[View], rate: float) -> tuple[Evidence, list[np.ndarray], list[np.ndarray]]:
     """A sphere (radius 0.45) with a neck above it (a cylinder of radius 0.12 up to z = 0.85) over the floor
-    :data:`FLOOR`: in every view
-    GrabCut keeps the sphere and loses the neck (a mirror reflects the room, coloured like it), no background
-    surface explains the neck, and ``rate`` of the rest of the sphere's image is unexplained too (the wrong
-    matches of the room's texture). Returns the evidence, the true masks and the neck's pixels per view."""
+    :data:`FLOOR`: in every view GrabCut keeps the sphere and loses the neck (a mirror reflects the room,
+    coloured like it), no background surface explains the neck, and ``rate`` of the rest of the sphere's image
+    is unexplained too (the wrong matches of the room's texture). Returns the evidence, the true masks and the
+    neck's pixels per view."""
     rng = np.random.default_rng(1)
     spheres, aboves, firsts, truths, necks = [], [], [], [], []
     for v in views:
