@@ -78,6 +78,7 @@ class SfmResult:
     num_verified_pairs: int  # pairs with a verified two-view geometry
     seconds: dict[str, float] = field(default_factory=dict)
     mapper: str = "incremental"  # which mapper made the model: "incremental" or "global"
+    unregistered: dict[str, str] = field(default_factory=dict)  # image stem -> why it has no camera
 
 
 def colmap_name(name: str) -> str:
@@ -311,8 +312,10 @@ def run_sfm(
         raise _no_model_error(db_path, names, features, num_verified, folder)
     best = ranked[0]
     others = [sorted(stem_of(im.name) for im in r.images.values() if im.has_pose) for r in ranked[1:]]
+    registered = {stem_of(im.name) for im in best.images.values() if im.has_pose}
+    why = unregistered_reasons(db_path, names, registered, others, verification_options(config, retry).min_num_inliers)
     result = SfmResult(best, [r.num_reg_images() for r in ranked], others, features, matcher, num_pairs,
-                       num_verified, seconds, mapper)
+                       num_verified, seconds, mapper, why)
     _check_registered(result, names, config, folder)
     return result
 
@@ -484,6 +487,56 @@ def _feature_counts(db_path: Path) -> dict[str, int]:
         db.close()
 
 
+def unregistered_reasons(db_path: Path, names: Sequence[str], registered: set[str], other_models: list[list[str]],
+                         min_inliers: int) -> dict[str, str]:
+    """Why each photo of ``names`` not in ``registered`` has no camera, in one sentence a user can act on, from
+    the matches in ``db_path``: a separate model; no photo verified with it (its best raw match count); verified
+    only with photos that did not register either; or verified with registered photos yet not placed (too few of
+    its features see the model's 3D points)."""
+    pycolmap = import_pycolmap()
+
+    missing = [n for n in names if n not in registered]
+    if not missing:
+        return {}
+    db = pycolmap.Database.open(db_path)
+    try:
+        id_to_name = {im.image_id: stem_of(im.name) for im in db.read_all_images()}
+        raw_ids, raw_counts = db.read_num_matches()
+        verified_ids, verified_counts = db.read_two_view_geometry_num_inliers()
+    finally:
+        db.close()
+
+    def by_photo(pair_ids: Any, counts: Any) -> dict[str, dict[str, int]]:
+        out: dict[str, dict[str, int]] = {}
+        for pid, k in zip(pair_ids, counts):
+            a, b = (id_to_name[int(i)] for i in pycolmap.pair_id_to_image_pair(int(pid)))
+            out.setdefault(a, {})[b] = int(k)
+            out.setdefault(b, {})[a] = int(k)
+        return out
+
+    raw, verified = by_photo(raw_ids, raw_counts), by_photo(verified_ids, verified_counts)
+    model_of = {n: m for m in other_models for n in m}
+    reasons = {}
+    for n in missing:
+        partners = {m: k for m, k in verified.get(n, {}).items() if k >= min_inliers}
+        placed = {m: k for m, k in partners.items() if m in registered}
+        if n in model_of:
+            reasons[n] = (f"in a separate model of {len(model_of[n])} photos that shares too few matches with the "
+                          f"main one")
+        elif not partners:
+            best = max(raw.get(n, {}).items(), key=lambda t: t[1], default=None)
+            seen = f"its best is {best[1]} matches with {best[0]}" if best else "no feature matched"
+            reasons[n] = f"no photo shares a verified geometry with it ({seen}; {min_inliers} inliers needed)"
+        elif not placed:
+            reasons[n] = (f"verified only with photos that did not register either "
+                          f"({', '.join(sorted(partners)[:4])})")
+        else:
+            best = max(placed.items(), key=lambda t: t[1])
+            reasons[n] = (f"verified with {len(placed)} registered photo(s) (best: {best[1]} inliers with {best[0]}), "
+                          f"but too few of its features see the model's 3D points to place it")
+    return reasons
+
+
 def _verified_pairs(db_path: Path, min_inliers: int) -> int:
     """Image pairs whose two-view geometry holds at least ``min_inliers`` matches (the database also keeps
     rows for pairs that failed verification)."""
@@ -570,6 +623,8 @@ def _check_registered(result: SfmResult, names: list[str], config: PosesConfig, 
         if missing:
             log.warning("%d of %d photos did not register and get no camera: %s", len(missing), len(names),
                         ", ".join(missing))
+            for n in missing:
+                log.warning("  %s: %s", n, result.unregistered.get(n, "not placed by the mapper"))
         return
     split = ""
     if len(result.model_sizes) > 1:
@@ -577,10 +632,11 @@ def _check_registered(result: SfmResult, names: list[str], config: PosesConfig, 
                  f"{' + '.join(map(str, result.model_sizes))} photos (the overlap between them is too weak; "
                  f"photos of the second: {', '.join(result.other_models[0][:10])}).")
     shown = ", ".join(missing[:20]) + (" ..." if len(missing) > 20 else "")
+    why = "".join(f" {n}: {result.unregistered[n]}." for n in missing[:5] if n in result.unregistered)
     raise InputError(
         f"only {len(registered)} of {len(names)} photos registered, at least {needed} needed "
         f"(poses.min_registered={config.min_registered}, poses.min_registered_fraction="
-        f"{config.min_registered_fraction}). Not registered: {shown}.{split}",
+        f"{config.min_registered_fraction}). Not registered: {shown}.{split}{why}",
         folder,
         fix=FIX_OVERLAP + "; or, to accept fewer photos, lower poses.min_registered_fraction",
     )
@@ -676,6 +732,7 @@ def posed_from_sfm(decoded: DecodeArtifacts, names: list[str], calibration: tupl
         "camera_groups": [{"photos": len(g.names), "model": g.model, "intrinsics_from": g.source, "fixed": g.fixed}
                           for g in groups],
         "seconds": {k: round(v, 2) for k, v in sfm.seconds.items()},
+        "not_registered_why": sfm.unregistered,
     }
     return posed_from_reconstruction(rec, names, stats), rec
 

@@ -313,13 +313,17 @@ def _report(posed: Posed, names: list[str], source: str, sphere: ObjectSphere, t
     centers = cameras.c2w()[:, :3, 3]
     dist = np.linalg.norm(centers, axis=1)
     lenses = Counter((c.model_name, tuple(np.round(c.params, 6))) for c in posed.lens)
+    missing = [n for n in names if n not in set(posed.names)]
     return {
         "schema": SCHEMA_VERSION,
         "source": source,
         "registered": len(posed.names),
         "total": len(names),
-        "not_registered": [n for n in names if n not in set(posed.names)],
+        "not_registered": missing,
         **{k: v for k, v in posed.stats.items()},
+        # SfM's reason where it gave one; the others were registered and then dropped by the pose checks
+        "not_registered_why": {n: posed.stats.get("not_registered_why", {}).get(
+            n, "registered, but its pose contradicts the capture (checks) and poses.on_suspect=drop") for n in missing},
         "intrinsics": [{"model": m, "params": list(p), "photos": k} for (m, p), k in lenses.items()],
         "undistorted": undistort is not None,
         "object": {
