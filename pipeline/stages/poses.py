@@ -363,7 +363,7 @@ examples:
   orca poses captures/mug                          # reads results/mug/decode -> results/mug/poses/
   orca poses captures/mug --masks my_masks/        # ignore features on the object (white = object)
   orca poses captures/mug --set matcher=sequential --set num_threads=4
-  orca poses captures/mug --set min_registered_fraction=0.5 --preset fast
+  orca poses captures/mug --set min_registered_fraction=0.3 --preset fast
 
 Known cameras: put cameras.json (orca schema), transforms.json (nerfstudio), poses_bounds.npy (LLFF, with
 all_image_names.txt naming its rows when it has more than the photos) or a COLMAP model (sparse/0/ or
