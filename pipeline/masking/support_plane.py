@@ -110,8 +110,11 @@ def ranked_cost(costs: Sequence[np.ndarray], count: np.ndarray, rank: int, min_v
     """``(h, w)`` float32: each pixel's ``rank``-th smallest (1-based) of ``costs`` (one ``(h, w)`` per neighbour,
     ``inf`` where that neighbour does not see the pixel), the rank dropping to ``count`` (``(h, w)``: neighbours
     that see it) where fewer see it; ``inf`` where fewer than ``min(min_views, rank)`` do (no evidence)."""
-    pick = np.clip(np.minimum(rank, count) - 1, 0, len(costs) - 1)
-    out = np.choose(pick, sorted_elementwise(costs))
+    ordered = sorted_elementwise(costs)
+    top = min(rank, len(costs))
+    out = ordered[top - 1]
+    for k in range(1, top):  # fewer neighbours see the pixel than the rank: the worst of those that do
+        out = np.where(count == k, ordered[k - 1], out)
     return np.where(count >= min(min_views, rank), out, np.inf).astype(np.float32)
 
 

@@ -5,7 +5,7 @@ views to compare; the support plane's type and the method's knobs."""
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -42,6 +42,17 @@ class Plane:
     def height(self, points: np.ndarray) -> np.ndarray:
         """``(..., 3)`` -> ``(...)`` signed height above the plane."""
         return points @ self.normal - self.offset
+
+    def framed(self, centre: np.ndarray, radius: float) -> Plane:
+        """The plane in the frame where the sphere ``(centre, radius)`` is the unit sphere at the origin
+        (``x' = (x - centre) / radius``); thickness scaled alike."""
+        return replace(self, offset=float((self.offset - self.normal @ centre) / radius),
+                       thickness=self.thickness / radius)
+
+    def unframed(self, centre: np.ndarray, radius: float) -> Plane:
+        """The inverse of :meth:`framed`: from the sphere's frame back to the one ``centre`` is given in."""
+        return replace(self, offset=float(radius * self.offset + self.normal @ centre),
+                       thickness=self.thickness * radius)
 
 
 @dataclass(frozen=True)

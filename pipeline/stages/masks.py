@@ -243,8 +243,7 @@ def run_masks(
     # back to the poses frame: segmentation ran where the prior sphere is the unit sphere
     centre, radius = prior.centre + prior.radius * centre, prior.radius * radius
     if plane is not None:
-        plane = Plane(plane.normal, float(prior.radius * plane.offset + plane.normal @ prior.centre),
-                      plane.consistent_fraction)
+        plane = plane.unframed(prior.centre, prior.radius)
     for w in warnings:
         log.warning("%s", w)
 
@@ -378,8 +377,7 @@ def _report(records: list[dict[str, Any]], agreement: list[float], sphere: tuple
             "explained_fraction": plane.consistent_fraction, "frame": "poses",
             # training reads this one (its hull start is cut below it)
             "cameras_json": {"normal": plane.normal.tolist(),
-                             "offset": float((plane.offset - plane.normal @ centre) / radius)
-                             if config.renormalize else plane.offset},
+                             "offset": plane.framed(centre, radius).offset if config.renormalize else plane.offset},
         },
         "rounds": rounds,
         "work_scale": scale,

@@ -629,3 +629,23 @@ def test_grabcut_trims_a_hull_too_large_by_a_ring_of_carpet_only_when_its_core_i
             assert (forced & ~obj).sum() > 0.5 * (hull & ~obj).sum()
     assert iou(masks[0.0], obj) < 0.7
     assert iou(masks[0.2], obj) > 0.9
+
+
+def test_a_plane_keeps_its_points_in_the_spheres_frame_and_back():
+    rng = np.random.default_rng(0)
+    normal = np.array([0.1, -0.2, 1.0])
+    normal /= np.linalg.norm(normal)
+    plane = Plane(normal, -0.7, 0.5, thickness=0.04)
+    centre, radius = np.array([0.3, -0.1, 0.2]), 2.5
+    # points on the plane stay on it once moved into the frame where the sphere is the unit sphere
+    a = np.cross(normal, [1.0, 0.0, 0.0])
+    b = np.cross(normal, a)
+    on = plane.offset * normal + rng.uniform(-3, 3, (20, 1)) * a + rng.uniform(-3, 3, (20, 1)) * b
+    framed = plane.framed(centre, radius)
+    np.testing.assert_allclose(framed.height((on - centre) / radius), 0.0, atol=1e-12)
+    # a point above it keeps its height, in the new frame's units
+    above = on[0] + 0.5 * normal
+    assert abs(framed.height((above - centre) / radius) - 0.5 / radius) < 1e-12
+    assert abs(framed.thickness - 0.04 / radius) < 1e-12
+    back = framed.unframed(centre, radius)
+    assert abs(back.offset - plane.offset) < 1e-12 and abs(back.thickness - plane.thickness) < 1e-12
