@@ -525,7 +525,8 @@ def unregistered_reasons(db_path: Path, names: Sequence[str], registered: set[st
                           f"main one")
         elif not partners:
             best = max(raw.get(n, {}).items(), key=lambda t: t[1], default=None)
-            seen = f"best: {best[1]} matches with {best[0]} before verification" if best else "no feature matched"
+            seen = (f"best: {best[1]} matches with {best[0]} before verification" if best
+                    else "no feature matched any photo it was compared with")
             reasons[n] = f"no photo shares a verified geometry with it ({seen}; {min_inliers} inliers needed)"
         elif not placed:
             reasons[n] = (f"verified only with photos that did not register either "
