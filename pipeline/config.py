@@ -352,6 +352,10 @@ class MasksConfig(StrictModel):
     sweep_neighbours: int = Field(3, ge=1, description="nearest views compared in the depth sweep")
     sweep_rank: int = Field(2, ge=1, description="how many of them must agree")
     sweep_threshold: float = Field(0.04, gt=0, lt=1, description="as floor_threshold, for the depth sweep")
+    sweep_step_px: float = Field(
+        1.0, gt=0, le=8, description="the depth sweep's planes are this far apart in disparity (pixels) in the "
+        "farthest neighbour: the sweep's time goes as its inverse"
+    )
     texture_threshold: float = Field(
         0.05, ge=0, description="the depth sweep counts only patches with at least this sRGB standard deviation "
         "(flat patches match at any depth)"

@@ -77,7 +77,8 @@ def corner_strength(image: np.ndarray, window: int = 5) -> np.ndarray:
 def occluder_evidence(view: View, others: Sequence[View], opts: SegmentOptions) -> np.ndarray:
     """``(H, W)`` bool: textured, unclipped pixels of the sphere's image that a surface outside the sphere
     explains (:func:`outside_cost`): a prop in front of the object, the room behind it."""
-    found = outside_cost(view, others, opts.sweep_rank, far=opts.sweep_far, match_exposure=opts.match_exposure)
+    found = outside_cost(view, others, opts.sweep_rank, step_px=opts.sweep_step_px, far=opts.sweep_far,
+                         match_exposure=opts.match_exposure)
     if found is None:
         return np.zeros(view.shape, bool)
     cost, box = found

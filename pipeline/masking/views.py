@@ -87,6 +87,7 @@ class SegmentOptions:
     sweep_neighbours: int = 3
     sweep_rank: int = 2
     sweep_threshold: float = 0.04
+    sweep_step_px: float = 1.0
     texture_threshold: float = 0.05
     occluder_reach_px: int = 6
     sweep_far: float = 4.0
