@@ -321,9 +321,7 @@ def _report(posed: Posed, names: list[str], source: str, sphere: ObjectSphere, t
         "total": len(names),
         "not_registered": missing,
         **{k: v for k, v in posed.stats.items()},
-        # SfM's reason where it gave one; the others were registered and then dropped by the pose checks
-        "not_registered_why": {n: posed.stats.get("not_registered_why", {}).get(
-            n, "registered, but its pose contradicts the capture (checks) and poses.on_suspect=drop") for n in missing},
+        "not_registered_why": {n: posed.stats.get("not_registered_why", {}).get(n, _unplaced(source)) for n in missing},
         "intrinsics": [{"model": m, "params": list(p), "photos": k} for (m, p), k in lenses.items()],
         "undistorted": undistort is not None,
         "object": {
@@ -341,6 +339,14 @@ def _report(posed: Posed, names: list[str], source: str, sphere: ObjectSphere, t
         "thresholds": {"min_registered": config.min_registered,
                        "min_registered_fraction": config.min_registered_fraction},
     }
+
+
+def _unplaced(source: str) -> str:
+    """Why a photo SfM gave no reason for has no camera: SfM registered it and the pose checks dropped it, or the
+    known cameras (``source``: their file) have none for it."""
+    if source == "sfm":
+        return "registered, but its pose contradicts the capture (checks) and poses.on_suspect=drop"
+    return f"no camera for it in {source}"
 
 
 def _checks_report(checks: PoseChecks, runs: list[dict[str, Any]], posed: Posed, K: np.ndarray, sizes: np.ndarray,

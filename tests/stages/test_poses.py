@@ -142,6 +142,22 @@ def test_known_cameras_get_sparse_points_triangulated_with_them(sfm_sphere_captu
     assert off.registered == len(truth) and load_poses(tmp_path / "off").reconstruction() is None
 
 
+def test_a_photo_the_known_cameras_lack_is_named_with_the_reason(tiny_capture, tiny_decode, tmp_path):
+    """transforms.json with cameras for 3 of the 4 photos: the 4th gets no camera, and the report says why."""
+    truth = load_cameras(tiny_capture / "ground_truth" / "cameras.json")
+    capture = tmp_path / "capture"
+    capture.mkdir()
+    save_transforms(capture / "transforms.json", truth.model_copy(update={"cameras": truth.cameras[:3]}))
+    result = run(capture, tiny_decode, tmp_path / "poses")
+    assert result.registered == 3
+    from pipeline.results import load_poses
+
+    report = load_poses(tmp_path / "poses").report
+    lacking = truth.cameras[3].name
+    assert report["not_registered"] == [lacking]
+    assert report["not_registered_why"] == {lacking: f"no camera for it in {capture / 'transforms.json'}"}
+
+
 def test_known_llff_poses_bounds_skips_sfm(tiny_capture, tiny_decode, tmp_path):
     """A capture with LLFF's poses_bounds.npy (rows in the photos' order): the same cameras, to_colmap maps
     them back to the file's frame."""
