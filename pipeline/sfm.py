@@ -622,10 +622,10 @@ def _check_registered(result: SfmResult, names: list[str], config: PosesConfig, 
                     "; ".join(", ".join(m) for m in result.other_models))
     if len(registered) >= needed:
         if missing:
-            log.warning("%d of %d photos did not register and get no camera: %s", len(missing), len(names),
-                        ", ".join(missing))
-            for n in missing:
-                log.warning("  %s: %s", n, result.unregistered.get(n, "not placed by the mapper"))
+            log.warning("%d of %d photos did not register and get no camera (why: below, and in "
+                        "poses_report.json not_registered_why): %s", len(missing), len(names), ", ".join(missing))
+            for n in missing:  # one line each in the log; the report holds them as data, not as more warnings
+                log.info("  %s: %s", n, result.unregistered.get(n, "not placed by the mapper"))
         return
     split = ""
     if len(result.model_sizes) > 1:

@@ -161,6 +161,8 @@ def section_poses(reader: Reader, folder: Path) -> tuple[str, Data]:
          f"known cameras: {report.get('source')}"),
         ("registered / total", f"{report.get('registered')} / {report.get('total')}"),
         ("not registered", ", ".join(report.get("not_registered") or []) or "none"),
+        ("why not registered", "; ".join(f"{n}: {why}" for n, why in (report.get("not_registered_why") or {}).items())
+         or ...),
         ("mean reprojection error (px)", report.get("mean_reprojection_error_px", ...)),
         ("mean track length", report.get("mean_track_length", ...)),
         ("3-D points", report.get("points3D", ...)),

@@ -204,6 +204,7 @@ def test_a_section_that_cannot_be_built_and_poses_from_sfm(results, tmp_path):
     poses = json.loads((odd / "poses" / "poses_report.json").read_text())
     poses.update(source="sfm", features={"min": 10, "median": 20, "max": 30, "per_image": {"IMG_0001": 10}},
                  mean_reprojection_error_px=0.73, models=[3, 1], not_registered=["IMG_0004"], pairs_matched=6,
+                 not_registered_why={"IMG_0004": "in a separate model of 1 photos"},
                  pairs_verified=5, reprojection_error_px_per_image={"IMG_0001": 0.5, "IMG_0002": 1.25})
     (odd / "poses" / "poses_report.json").write_text(json.dumps(poses))
     with (odd / "train" / "metrics.jsonl").open("a") as f:
@@ -221,6 +222,7 @@ def test_a_section_that_cannot_be_built_and_poses_from_sfm(results, tmp_path):
     assert "cameras from SfM (pycolmap)" in poses_section and "image pairs matched / verified 6 / 5" in poses_section
     assert "SfM split the photos into 2 models [3, 1]" in poses_section
     assert "1 photo(s) without a camera: IMG_0004" in poses_section
+    assert "why not registered IMG_0004: in a separate model of 1 photos" in poses_section
     assert "reprojection error per photo (2)" in poses_section and "IMG_0002 1.25" in poses_section
     assert summary["summaries"]["poses"] == "4/4 registered, reprojection 0.73 px"
     assert "1 line(s) of metrics.jsonl did not parse." in Page(_section(document, "train")).body
