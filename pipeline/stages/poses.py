@@ -313,7 +313,8 @@ def _report(posed: Posed, names: list[str], source: str, sphere: ObjectSphere, t
     centers = cameras.c2w()[:, :3, 3]
     dist = np.linalg.norm(centers, axis=1)
     lenses = Counter((c.model_name, tuple(np.round(c.params, 6))) for c in posed.lens)
-    missing = [n for n in names if n not in set(posed.names)]
+    posed_names = set(posed.names)
+    missing = [n for n in names if n not in posed_names]
     return {
         "schema": SCHEMA_VERSION,
         "source": source,
