@@ -65,7 +65,7 @@ class SegmentOptions:
     carve_votes: float = 3.0
     carve_share: float = 0.2
     core_erode_px: int = 3
-    core_fraction: float = 0.2
+    core_fraction: float = 0.4
     final_core_fraction: float = 0.0
     band_px: int = 4
     neighbours: int = 6
