@@ -42,6 +42,7 @@ from pipeline.masking.prior import find_prior_sphere, framed_options, in_sphere_
 from pipeline.masking.scale import load_view  # noqa: E402
 from pipeline.masking.segment import gather_evidence, probe_masks, refine, segment_options  # noqa: E402
 from pipeline.masking.tracks import tracks_for_views  # noqa: E402
+from pipeline.masking.views import SegmentOptions  # noqa: E402
 from pipeline.metrics import iou  # noqa: E402
 from pipeline.results import image_folder, load_decode  # noqa: E402
 from pipeline.sparse_depth import load_sparse_points  # noqa: E402
@@ -81,8 +82,18 @@ def build(results: Path, cache: Path, reference: Path | None, overrides: dict[st
     cache.parent.mkdir(parents=True, exist_ok=True)
     with open(cache, "wb") as f:
         pickle.dump({"results": str(results), "views": views, "opts": opts, "evidence": evidence, "references": refs,
-                     "prior_radius": prior.radius}, f)
+                     "prior_radius": prior.radius, "overrides": overrides}, f)
     print(f"{cache}: {len(views)} views, sphere prior {prior.radius:.2f}, evidence in {time.time() - started:.0f} s")
+
+
+def rounds_options(c: dict[str, Any], cache: Path) -> SegmentOptions:
+    """The options the rounds run under: today's defaults with the build's overrides, framed by its sphere -- not
+    the options pickled at build time, whose defaults may have changed since (a variant then compares against an
+    old default). Caches written before the overrides were kept give their pickled options, with a warning."""
+    if "overrides" not in c:
+        print(f"  {cache.name}: an older cache, its build-time options are used; rebuild it for today's defaults")
+        return c["opts"]
+    return framed_options(segment_options(MasksConfig(**c["overrides"])), c["prior_radius"])
 
 
 def evaluate(caches: list[Path], variant: dict[str, Any], pictures: Path | None) -> dict[str, Any]:
@@ -92,7 +103,7 @@ def evaluate(caches: list[Path], variant: dict[str, Any], pictures: Path | None)
         with open(cache, "rb") as f:
             c = pickle.load(f)  # noqa: S301 -- this script's own cache
         started = time.time()
-        seg = refine(c["views"], dataclasses.replace(c["opts"], **variant), c["evidence"])
+        seg = refine(c["views"], dataclasses.replace(rounds_options(c, cache), **variant), c["evidence"])
         refs = c["references"]
         scores = np.array([iou(m, r) for m, r in zip(seg.masks, refs)])
         added = np.median([(m & ~r).sum() / max(r.sum(), 1) for m, r in zip(seg.masks, refs)])
