@@ -7,10 +7,21 @@ import logging
 import os
 import sys
 from collections.abc import Iterator
+from typing import Any
 
 from rich.console import Console
 from rich.logging import RichHandler
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TaskID,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
+
+from .signals import raise_if_terminated
 
 console = Console(stderr=True)
 
@@ -26,9 +37,22 @@ def setup_logging(verbose: bool = False) -> None:
     )
 
 
+class _StoppableProgress(Progress):
+    """A rich progress bar whose every step first raises a SIGTERM that a finalizer swallowed
+    (:func:`pipeline.signals.raise_if_terminated`): the stage stops at its next step, as it would have."""
+
+    def advance(self, task_id: TaskID, advance: float = 1) -> None:
+        raise_if_terminated()
+        super().advance(task_id, advance)
+
+    def update(self, task_id: TaskID, **kwargs: Any) -> None:
+        raise_if_terminated()
+        super().update(task_id, **kwargs)
+
+
 def progress() -> Progress:
     """A progress bar (hidden when stderr is not a terminal, e.g. under CI or Snakemake logs)."""
-    return Progress(
+    return _StoppableProgress(
         TextColumn("[bold]{task.description}"),
         BarColumn(),
         MofNCompleteColumn(),

@@ -20,10 +20,25 @@ class Terminated(KeyboardInterrupt):
     """SIGTERM arrived; raised in the main thread wherever it was, as Ctrl-C raises ``KeyboardInterrupt``."""
 
 
+# Set by the handler, cleared once the stop is raised again or handled. Python swallows an exception raised while a
+# finalizer runs (``__del__``, a weakref callback: printed as "Exception ignored in ...") -- a SIGTERM landing
+# there would be lost, and with SIGTERM ignored from then on the stage would run to its end.
+_pending = threading.Event()
+
+
 def _raise_terminated(signum: int, frame: object) -> None:
     # One unwinding is enough: a second SIGTERM would break off the checkpoint or the clean-up it is running.
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    _pending.set()
     raise Terminated("SIGTERM")
+
+
+def raise_if_terminated() -> None:
+    """Raise :class:`Terminated` if a SIGTERM arrived whose exception was swallowed (see ``_pending``). Long loops
+    call it once per step; :func:`pipeline.log.progress` bars call it on every advance and update."""
+    if _pending.is_set():
+        _pending.clear()
+        raise Terminated("SIGTERM")
 
 
 def stop_on_sigterm() -> None:
@@ -32,7 +47,9 @@ def stop_on_sigterm() -> None:
 
 
 def stopped_by(interrupt: KeyboardInterrupt) -> signal.Signals:
-    """The signal behind a ``KeyboardInterrupt``: SIGTERM for :class:`Terminated`, else SIGINT (Ctrl-C)."""
+    """The signal behind a ``KeyboardInterrupt``: SIGTERM for :class:`Terminated`, else SIGINT (Ctrl-C). The stop
+    is handled: it is not raised again."""
+    _pending.clear()
     return signal.SIGTERM if isinstance(interrupt, Terminated) else signal.SIGINT
 
 

@@ -35,6 +35,7 @@ from .imageio import to_srgb8, write_png
 from .layout import LIVE_TENSORBOARD, METRICS, PREVIEWS
 from .log import progress
 from .model_io import loss_weights
+from .signals import raise_if_terminated
 from .sparse_depth import far_bound
 
 log = logging.getLogger("orca.train")
@@ -149,6 +150,7 @@ def train(data, model, cfg: TrainConfig, ckpt_dir: Path, *, restart: bool = Fals
         with progress() as bar, open(metrics_path, "a", encoding="utf-8") as metrics:
             task = bar.add_task("train", total=cfg.iterations, completed=step)
             while step < stop_at:
+                raise_if_terminated()
                 phase = "mask" if step < cfg.mask_warmup else "joint"
                 model.apply_schedule(step / cfg.iterations)
                 batch = data.sample(cfg.batch_rays, cfg.sampler.object_fraction, generator)
