@@ -4,6 +4,11 @@ A step draws what `orca train`'s joint phase draws: object, background and spars
     python bench/train_speed.py                       # every preset, on CUDA if there is a GPU, else CPU
     python bench/train_speed.py --device cpu --presets fast --steps 20
     python bench/train_speed.py --presets fast --results results/demo    # on the demo's own inputs
+    python bench/train_speed.py --presets fast --batch-scales 1 4 16 64 --profile    # rays/s against batch size
+
+--batch-scales multiplies every kind of ray a step draws (object, background, sparse depth): on a GPU the rays
+per second grow with it for as long as a step is bound by launching kernels rather than by their work.
+--profile adds, on a GPU, the kernels one step launches and the share of the step's wall time the GPU is busy.
 
 The data are a synthetic ring of posed images of a sphere-sized object (the speed of a step hardly depends on
 the pixels' values), so the benchmark needs no capture; --results times the inputs of a DAG's run instead.
@@ -75,8 +80,34 @@ def capture_images(results: Path, cfg):
     return data, with_far_from_points(cfg, data, points)
 
 
-def bench_preset(preset: str, device: torch.device, steps: int, warmup: int, results: Path | None = None) -> dict:
-    cfg = load_config(preset=preset).train
+def scaled(cfg, scale: float):
+    """``cfg`` with every kind of ray a step draws multiplied by ``scale``."""
+    if scale == 1:
+        return cfg
+    n = lambda k: max(int(round(k * scale)), 1) if k else 0  # noqa: E731
+    sampler = cfg.sampler.model_copy(update={"background_rays": n(cfg.sampler.background_rays),
+                                             "depth_rays": n(cfg.sampler.depth_rays)})
+    return cfg.model_copy(update={"batch_rays": n(cfg.batch_rays), "sampler": sampler})
+
+
+def kernel_profile(step, device: torch.device) -> dict:
+    """Kernels one ``step`` launches on the GPU and the share of its wall time they keep the GPU busy."""
+    from torch.profiler import ProfilerActivity, profile
+
+    torch.cuda.synchronize()
+    with profile(activities=[ProfilerActivity.CPU, ProfilerActivity.CUDA]) as prof:
+        t0 = time.perf_counter()
+        step()
+        torch.cuda.synchronize()
+        wall = time.perf_counter() - t0
+    kernels = [e for e in prof.events() if e.device_type == torch.autograd.DeviceType.CUDA]
+    busy = sum(e.device_time for e in kernels) * 1e-6  # device_time is in microseconds
+    return {"kernels_per_step": len(kernels), "gpu_busy_fraction": busy / wall, "profiled_step_seconds": wall}
+
+
+def bench_preset(preset: str, device: torch.device, steps: int, warmup: int, results: Path | None = None,
+                 scale: float = 1.0, profile: bool = False) -> dict:
+    cfg = scaled(load_config(preset=preset).train, scale)
     torch.manual_seed(0)
     if results is None:
         data = synthetic_images(device)
@@ -117,6 +148,7 @@ def bench_preset(preset: str, device: torch.device, steps: int, warmup: int, res
         step()
     sync()
     per_step = (time.perf_counter() - t0) / steps
+    kernels = kernel_profile(step, device) if profile and device.type == "cuda" else {}
 
     # Rendering (evaluation): object rays, no parameter gradients.
     batch = data.sample(cfg.batch_rays, 1.0, g)
@@ -130,13 +162,16 @@ def bench_preset(preset: str, device: torch.device, steps: int, warmup: int, res
         sync()
         render_s = (time.perf_counter() - t0) / max(steps // 2, 1)
     return {
-        "preset": preset, "batch_rays": cfg.batch_rays, "background_rays": sampler.background_rays,
-        "depth_rays": sampler.depth_rays if use_depth else 0,
+        "preset": preset, "batch_scale": scale, "batch_rays": cfg.batch_rays,
+        "background_rays": sampler.background_rays, "depth_rays": sampler.depth_rays if use_depth else 0,
         "iterations": cfg.iterations,
         "seconds_per_iteration": per_step, "train_rays_per_second": cfg.batch_rays / per_step,
+        "all_rays_per_second": (cfg.batch_rays + sampler.background_rays
+                                + (sampler.depth_rays if use_depth else 0)) / per_step,
         "render_rays_per_second": cfg.batch_rays / render_s,
         "full_training_minutes": per_step * cfg.iterations / 60,
         "peak_gpu_memory_gb": torch.cuda.max_memory_allocated() / 2**30 if device.type == "cuda" else None,
+        **kernels,
     }
 
 
@@ -149,17 +184,23 @@ def main() -> None:
     p.add_argument("--out", type=Path, default=None)
     p.add_argument("--results", type=Path, default=None,
                    help="time on a capture's own inputs: a DAG's results/<capture> folder (decode, poses, masks)")
+    p.add_argument("--batch-scales", type=float, nargs="+", default=[1.0],
+                   help="multiply every kind of ray a step draws by each of these in turn")
+    p.add_argument("--profile", action="store_true", help="on a GPU: kernels per step, GPU busy share")
     args = p.parse_args()
     device = resolve_device(args.device)
     rows = []
     for preset in args.presets:
-        row = bench_preset(preset, device, args.steps, args.warmup, args.results)
-        rows.append(row)
-        print(f"{preset:9s} {row['seconds_per_iteration']:8.3f} s/it  "
-              f"{row['train_rays_per_second']:9.0f} train rays/s  "
-              f"{row['render_rays_per_second']:9.0f} render rays/s  (batch {row['batch_rays']} + "
-              f"{row['background_rays']} background; "
-              f"{row['iterations']} iterations = {row['full_training_minutes']:.1f} min)", flush=True)
+        for scale in args.batch_scales:
+            row = bench_preset(preset, device, args.steps, args.warmup, args.results, scale, args.profile)
+            rows.append(row)
+            busy = (f"; {row['kernels_per_step']} kernels, GPU busy {100 * row['gpu_busy_fraction']:.0f} %"
+                    if "kernels_per_step" in row else "")
+            print(f"{preset:9s} x{scale:<4g} {row['seconds_per_iteration']:8.3f} s/it  "
+                  f"{row['train_rays_per_second']:9.0f} train rays/s  "
+                  f"{row['render_rays_per_second']:9.0f} render rays/s  (batch {row['batch_rays']} + "
+                  f"{row['background_rays']} background; "
+                  f"{row['iterations']} iterations = {row['full_training_minutes']:.1f} min{busy})", flush=True)
     machine = {
         "device": (torch.cuda.get_device_name(0) if device.type == "cuda"
                    else platform.processor() or platform.machine()),
