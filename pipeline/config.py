@@ -155,6 +155,10 @@ class PosesConfig(StrictModel):
         "bench/results/front_end.jsonl, blowtorch.jsonl)."
     )
     max_num_features: int = Field(8192, ge=64, description="SIFT features kept per image.")
+    sift_peak_threshold: float = Field(
+        0.02 / 3, gt=0, description="SIFT's contrast threshold on difference-of-Gaussian peaks (COLMAP's default "
+        "0.02 / octave_resolution): lower finds features in fainter texture, a plain wall's or floor's."
+    )
     min_features: int = Field(
         50, ge=1, description="an image with fewer SIFT features than this counts as featureless."
     )

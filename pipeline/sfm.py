@@ -326,6 +326,7 @@ def extraction_options(config: PosesConfig, threads: int) -> pycolmap.FeatureExt
     extraction.num_threads = threads
     extraction.max_image_size = config.max_image_size or -1
     extraction.sift.max_num_features = config.max_num_features
+    extraction.sift.peak_threshold = config.sift_peak_threshold
     return extraction
 
 

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 
 from pipeline.config import PosesConfig
-from pipeline.sfm import equalized_gray, required_registered, sequential_pairs
+from pipeline.sfm import equalized_gray, extraction_options, required_registered, sequential_pairs
 from pipeline.signals import import_pycolmap
 
 
@@ -47,3 +47,22 @@ def test_a_photo_darkened_by_stops_keeps_its_sift_features_once_equalized():
     np.testing.assert_array_equal(equalized_gray(photo, 0.3), photo)  # bright enough: as it is
     assert features(dark) < 0.1 * features(photo)
     assert features(equalized) > 0.8 * features(photo)
+
+
+def test_a_lower_sift_peak_threshold_finds_features_in_faint_texture():
+    """A plain wall's faint shading is below SIFT's default contrast threshold; poses.sift_peak_threshold reaches
+    the extractor the poses stage builds and, lowered, finds features there."""
+    pycolmap = import_pycolmap()
+    rng = np.random.default_rng(1)
+    texture = sum(cv2.resize(rng.uniform(0, 1, (s, s)).astype(np.float32), (256, 256), interpolation=cv2.INTER_CUBIC)
+                  for s in (8, 16, 32))
+    faint = (120 + 4 * (texture - texture.mean()) / texture.std()).clip(0, 255).astype(np.uint8)  # std 4 levels
+
+    def features(peak: float) -> int:
+        options = extraction_options(PosesConfig(sift_peak_threshold=peak), threads=1)
+        assert options.sift.peak_threshold == peak
+        sift = pycolmap.FeatureExtractor.create(options, pycolmap.Device.cpu)
+        return len(sift.extract_from_uint8_array(faint)[0])
+
+    default, low = features(PosesConfig().sift_peak_threshold), features(0.002)
+    assert default < 10 and low > 100, (default, low)
