@@ -12,6 +12,16 @@ from .sampling import ray_sphere_bounds
 
 OBJECT_KEYS = ("rgb", "diffuse", "specular", "normal", "opacity", "depth")
 
+# Environment rays per chunk. A CPU renders them faster in small chunks, whose samples' activations (rays x ~120
+# samples x the MLP's width) stay in its caches: 7 500 rays/s at 512 or 1024 a chunk against 4 300 at 8192 on 2
+# Xeon cores; a GPU needs large ones to be busy.
+ENVIRONMENT_CHUNK = {"cpu": 1024, "cuda": 8192}
+
+
+def environment_chunk(device: torch.device) -> int:
+    """Environment rays per chunk on ``device`` (:data:`ENVIRONMENT_CHUNK`; a GPU's for other devices)."""
+    return ENVIRONMENT_CHUNK.get(device.type, ENVIRONMENT_CHUNK["cuda"])
+
 
 def image_rays(
     K: torch.Tensor, c2w: torch.Tensor, height: int, width: int
@@ -77,11 +87,13 @@ def render_object_image(
 
 @torch.no_grad()
 def render_environment_image(
-    model: OrcaModel, K: torch.Tensor, c2w: torch.Tensor, height: int, width: int, chunk: int = 8192
+    model: OrcaModel, K: torch.Tensor, c2w: torch.Tensor, height: int, width: int, chunk: int | None = None
 ) -> dict[str, torch.Tensor]:
     """Render the environment field alone (object absent) from any camera: ``rgb`` ``(H, W, 3)`` and
-    z-depth ``depth`` ``(H, W)`` along the camera's optical axis."""
+    z-depth ``depth`` ``(H, W)`` along the camera's optical axis (``chunk``: rays at a time, by default
+    :func:`environment_chunk`'s)."""
     origins, dirs, radii = image_rays(K, c2w, height, width)
+    chunk = chunk or environment_chunk(origins.device)
     axis = c2w[:3, 2]
     rgbs, depths = [], []
     for i in range(0, origins.shape[0], chunk):
@@ -94,12 +106,14 @@ def render_environment_image(
 
 @torch.no_grad()
 def render_composite_image(
-    model: OrcaModel, K: torch.Tensor, c2w: torch.Tensor, height: int, width: int, chunk: int = 8192
+    model: OrcaModel, K: torch.Tensor, c2w: torch.Tensor, height: int, width: int, chunk: int | None = None
 ) -> torch.Tensor:
     """What a camera would photograph: the object over the environment field, ``(H, W, 3)`` linear
     (``rgb + (1 - opacity) * environment``; the environment is traced only where the object lets it through,
-    the object only where rays meet its bounding sphere)."""
+    ``chunk`` rays at a time, by default :func:`environment_chunk`'s; the object only where rays meet its
+    bounding sphere)."""
     origins, dirs, radii = image_rays(K, c2w, height, width)
+    chunk = chunk or environment_chunk(origins.device)
     obj = render_object_rays(model, origins, dirs, radii, skip_misses=True)
     rgb = obj["rgb"].clone()
     through = torch.nonzero(obj["opacity"] < 1 - 1e-3).squeeze(-1)

@@ -138,13 +138,17 @@ def flythrough_path(cfg: ExportConfig, frame: np.ndarray) -> list[Camera]:
 
 
 def render_panorama(model, width: int, height: int, centre: np.ndarray, frame: np.ndarray,
-                    chunk: int = 8192, bar=None, task=None) -> dict[str, np.ndarray]:
+                    chunk: int | None = None, bar=None, task=None) -> dict[str, np.ndarray]:
     """The environment field from ``centre`` as an equirectangular panorama: ``rgb`` ``(H, W, 3)`` linear and
     ``depth`` ``(H, W)``, the distance along each ray at the model's ``spec.render.depth_quantile`` of its
-    weight (:func:`orca.volume.quantile_depth`)."""
+    weight (:func:`orca.volume.quantile_depth`); ``chunk`` rays at a time (default: the device's,
+    :func:`orca.imaging.environment_chunk`)."""
     import torch
 
+    from orca.imaging import environment_chunk
+
     device = next(model.parameters()).device
+    chunk = chunk or environment_chunk(device)
     origins, dirs, radii = (torch.as_tensor(np.ascontiguousarray(a), dtype=torch.float32, device=device)
                             for a in equirect_rays(width, height, centre, frame))
     rgbs, depths = [], []
