@@ -207,25 +207,54 @@ def objective(
             model.env_field, batch.origins[obj], batch.dirs[obj], batch.radii[obj], model.spec.render
         )
         terms["free_space"] = opacity.mean()
-    if weights.background > 0:
-        rays = [tuple(t[~obj] for t in _background_parts(batch, gains))]
-        if background is not None:
-            rays.append(_background_parts(background, gains))
-        origins, dirs, radii, rgb, valid, photo = (torch.cat(parts) for parts in zip(*rays))
-        if origins.shape[0]:
-            near = model.spec.background_near * origins.norm(dim=-1)  # the object's centre is the origin
-            env_rgb, _ = model.environment(origins, dirs, radii, near)
-            if gains is not None:
-                env_rgb = apply_gains(env_rgb, gains, photo)
-            terms["background"] = photometric_loss(env_rgb, rgb, valid, ~valid, weights.clipped_excess)
-    if weights.sparse_depth > 0 and depth is not None and not model.env_field.directional:
-        w, edges, _ = environment_weights(model.env_field, depth.origins, depth.dirs, depth.radii,
-                                          torch.zeros_like(depth.radii), model.spec.render)
-        terms["sparse_depth"] = sparse_depth_loss(w, edges, depth.distance, weights.sparse_depth_band * depth.distance)
+    terms.update(environment_terms(model, batch, obj, weights, gains, background, depth))
     if gains is not None:
         terms["appearance"] = appearance_prior(model.log_gains)
     total = sum(getattr(weights, k) * v for k, v in terms.items())
     return total, {k: v.detach() for k, v in terms.items()}, out
+
+
+def environment_terms(
+    model: OrcaModel, batch: Batch, obj: torch.Tensor, weights: LossWeights, gains: torch.Tensor | None,
+    background: Batch | None, depth: DepthBatch | None,
+) -> dict[str, torch.Tensor]:
+    """The background term (the environment field against the off-object pixels of ``batch``, whose ``(N,)``
+    bool ``obj`` marks the object's, and of ``background``) and the sparse-depth term (its weights along
+    ``depth``'s rays against their points' distances), as :func:`objective` weighs them.
+
+    Both sets of rays go through the field in one pass: a training step on a GPU costs its number of kernel
+    launches more than their work, and each pass of the field is a few hundred of them. The object's inside is
+    empty for both (``OrcaModel.solid``); background rays start ``spec.background_near`` of the way to the
+    object's centre, depth rays at their camera."""
+    terms: dict[str, torch.Tensor] = {}
+    rays = []
+    if weights.background > 0:
+        rays.append(tuple(t[~obj] for t in _background_parts(batch, gains)))
+        if background is not None:
+            rays.append(_background_parts(background, gains))
+    origins, dirs, radii, rgb, valid, photo = (torch.cat(parts) for parts in zip(*rays)) if rays else [None] * 6
+    n = 0 if origins is None else origins.shape[0]
+    use_depth = weights.sparse_depth > 0 and depth is not None and not model.env_field.directional
+    if model.env_field.directional:  # a 2D map: colour alone
+        env_rgb = model.environment(origins, dirs, radii)[0] if n else None
+    elif n or use_depth:
+        starts = [model.spec.background_near * origins.norm(dim=-1)] if n else []  # the object's centre is 0
+        cones = [(origins, dirs, radii)] if n else []
+        if use_depth:
+            starts.append(torch.zeros_like(depth.radii))
+            cones.append((depth.origins, depth.dirs, depth.radii))
+        apex, axis, growth = (torch.cat(parts) for parts in zip(*cones))
+        w, edges, radiance = environment_weights(model.env_field, apex, axis, growth, torch.cat(starts),
+                                                 model.spec.render, model.solid)
+        env_rgb = (w[:n, :, None] * radiance[:n]).sum(-2)
+        if use_depth:
+            terms["sparse_depth"] = sparse_depth_loss(w[n:], edges[n:], depth.distance,
+                                                      weights.sparse_depth_band * depth.distance)
+    if n:
+        if gains is not None:
+            env_rgb = apply_gains(env_rgb, gains, photo)
+        terms["background"] = photometric_loss(env_rgb, rgb, valid, ~valid, weights.clipped_excess)
+    return terms
 
 
 def _background_parts(batch: Batch, gains: torch.Tensor | None) -> tuple[torch.Tensor, ...]:
