@@ -8,7 +8,9 @@ A step draws what `orca train`'s joint phase draws: object, background and spars
 
 --batch-scales multiplies every kind of ray a step draws (object, background, sparse depth): on a GPU the rays
 per second grow with it for as long as a step is bound by launching kernels rather than by their work.
---profile adds, on a GPU, the kernels one step launches and the share of the step's wall time the GPU is busy.
+--profile adds, on a GPU, the kernels one step launches and the share of the step's wall time the GPU is busy;
+on a CPU, the operations one step runs on the GPU's code path (views and other metadata-only operations left out):
+what a GPU step launches as kernels, measurable without one.
 
 The data are a synthetic ring of posed images of a sphere-sized object (the speed of a step hardly depends on
 the pixels' values), so the benchmark needs no capture; --results times the inputs of a DAG's run instead.
@@ -105,6 +107,38 @@ def kernel_profile(step, device: torch.device) -> dict:
     return {"kernels_per_step": len(kernels), "gpu_busy_fraction": busy / wall, "profiled_step_seconds": wall}
 
 
+# aten operations that move no data (views, shapes, allocation): no kernel on a GPU
+_METADATA_OPS = {"view", "as_strided", "_reshape_alias", "expand", "permute", "t", "transpose", "unsqueeze", "squeeze",
+                 "select", "slice", "detach", "alias", "split", "split_with_sizes", "unbind", "view_as_real",
+                 "view_as_complex", "_unsafe_view", "diagonal", "unfold", "lift_fresh", "resolve_conj", "resolve_neg",
+                 "empty", "empty_strided", "empty_like", "new_empty", "new_empty_strided", "_local_scalar_dense",
+                 "is_nonzero", "sym_size", "sym_stride"}
+
+
+def operation_count(step) -> dict:
+    """Operations one ``step`` runs on the CPU through the tensor path a GPU takes (the environment field's fused
+    CPU lookup, :mod:`orca.hashgrid_cpu`, is switched off), metadata-only ones left out."""
+    from torch.utils._python_dispatch import TorchDispatchMode
+
+    import orca.hashgrid_cpu as fused
+
+    class Count(TorchDispatchMode):
+        n = 0
+
+        def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+            if func.__name__.split(".")[0] not in _METADATA_OPS:
+                Count.n += 1
+            return func(*args, **(kwargs or {}))
+
+    usable, fused.usable = fused.usable, lambda *a: False
+    try:
+        with Count():
+            step()
+    finally:
+        fused.usable = usable
+    return {"operations_per_step": Count.n}
+
+
 def bench_preset(preset: str, device: torch.device, steps: int, warmup: int, results: Path | None = None,
                  scale: float = 1.0, profile: bool = False) -> dict:
     cfg = scaled(load_config(preset=preset).train, scale)
@@ -148,7 +182,8 @@ def bench_preset(preset: str, device: torch.device, steps: int, warmup: int, res
         step()
     sync()
     per_step = (time.perf_counter() - t0) / steps
-    kernels = kernel_profile(step, device) if profile and device.type == "cuda" else {}
+    kernels = ({} if not profile else kernel_profile(step, device) if device.type == "cuda"
+               else operation_count(step))
 
     # Rendering (evaluation): object rays, no parameter gradients.
     batch = data.sample(cfg.batch_rays, 1.0, g)
@@ -186,7 +221,8 @@ def main() -> None:
                    help="time on a capture's own inputs: a DAG's results/<capture> folder (decode, poses, masks)")
     p.add_argument("--batch-scales", type=float, nargs="+", default=[1.0],
                    help="multiply every kind of ray a step draws by each of these in turn")
-    p.add_argument("--profile", action="store_true", help="on a GPU: kernels per step, GPU busy share")
+    p.add_argument("--profile", action="store_true",
+                   help="on a GPU: kernels per step, GPU busy share; on a CPU: operations per step")
     args = p.parse_args()
     device = resolve_device(args.device)
     rows = []
@@ -195,7 +231,8 @@ def main() -> None:
             row = bench_preset(preset, device, args.steps, args.warmup, args.results, scale, args.profile)
             rows.append(row)
             busy = (f"; {row['kernels_per_step']} kernels, GPU busy {100 * row['gpu_busy_fraction']:.0f} %"
-                    if "kernels_per_step" in row else "")
+                    if "kernels_per_step" in row
+                    else f"; {row['operations_per_step']} operations" if "operations_per_step" in row else "")
             print(f"{preset:9s} x{scale:<4g} {row['seconds_per_iteration']:8.3f} s/it  "
                   f"{row['train_rays_per_second']:9.0f} train rays/s  "
                   f"{row['render_rays_per_second']:9.0f} render rays/s  (batch {row['batch_rays']} + "
