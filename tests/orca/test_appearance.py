@@ -43,7 +43,9 @@ def _rays(n: int, photos: int, gains: torch.Tensor, seed: int = 0) -> Batch:
 
 def test_training_recovers_each_photos_exposure_and_white_balance():
     """Four photos a stop apart in exposure and with different tints: after training, the learned gains match
-    the applied ones to a few percent, and the fit is closer than one appearance for all can be."""
+    the applied ones to a few percent, and the fit is closer than one appearance for all can be (the mean colour
+    loss of the last twenty steps: one step's swings by a third from the next, and where it ends depends on
+    float rounding; over seeds 0-3 the ratio is 0.11-0.24)."""
     torch.manual_seed(0)
     exposure = torch.tensor([-0.5, 0.0, 0.5, 0.0]) * math.log(2)
     tint = torch.tensor([[0.1, 0.0, -0.1], [-0.1, 0.0, 0.1], [0.0, 0.0, 0.0], [0.15, 0.0, 0.05]])
@@ -55,13 +57,16 @@ def test_training_recovers_each_photos_exposure_and_white_balance():
             sdf=SDFFieldSpec(hash_grid=GRID, init_radius=0.55), env=EnvironmentFieldSpec(hash_grid=GRID),
             render=RenderSpec(n_coarse=16, n_fine=8, env_samples=8, env_fine=0, cone_samples=1), photos=photos,
         ))
-        opt = torch.optim.Adam(model.parameters(), lr=2e-2)
-        for _ in range(60):
+        opt = torch.optim.Adam(model.parameters(), lr=1e-2)
+        tail = []
+        for step in range(80):
             total, terms, _ = objective(model, batch, LossWeights(), "joint")
             opt.zero_grad()
             total.backward()
             opt.step()
-        losses[photos] = terms["photometric"].item() + terms["background"].item()
+            if step >= 60:
+                tail.append(terms["photometric"].item() + terms["background"].item())
+        losses[photos] = sum(tail) / len(tail)
         if photos:
             learned = model.photo_gains().detach()
             assert (learned / truth - 1).abs().max() < 0.05, (learned, truth)
