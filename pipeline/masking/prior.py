@@ -74,9 +74,8 @@ def grown(masks: Sequence[np.ndarray], views: Sequence[View], growth: float) -> 
 
 
 def probe_options(opts: SegmentOptions) -> SegmentOptions:
-    """The cheap segmentation a probe runs: the sphere prior and one round of carving, no floor, no sweeps, no
-    choice by edges (it would trim what reaches the sphere, and it is what the probe measures)."""
-    return replace(opts, rounds=1, floor=False, sweep=False, front_sweep=False, through_floor=False, edge_choice=False)
+    """The cheap segmentation a probe runs: the sphere prior and one round of carving, no floor, no sweeps."""
+    return replace(opts, rounds=1, floor=False, sweep=False, front_sweep=False, through_floor=False)
 
 
 def framed_options(opts: SegmentOptions, radius: float) -> SegmentOptions:
