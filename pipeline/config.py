@@ -311,19 +311,6 @@ class MasksConfig(StrictModel):
         "background: its colours failed (a shadowed side lost to a dark floor), the views agree on the hull; "
         "1: never"
     )
-    edge_choice: bool = Field(
-        True, description="in the last round each view's GrabCut runs twice, forcing the hull's core as object "
-        "and leaving core_fraction of it to colour as the earlier rounds do; the final mask is the second when its "
-        "outline follows the photo's edges along a larger share of its length by more than edge_choice_margin "
-        "(pipeline.masking.outline): colour then trimmed a wedge of room the hull kept, not a rim mirroring it"
-    )
-    edge_choice_margin: float = Field(0.1, ge=0, le=1, description="...by more than this share of the outline")
-    outline_contrast: float = Field(
-        2.0, gt=0, description="...an outline pixel is on an edge where the gradient within a pixel is at least this "
-        "many times the median gradient beside the outline"
-    )
-    outline_band_px: int = Field(7, ge=2, description="...'beside the outline': this many pixels on either side, at "
-                                 "work_size")
     neighbours: int = Field(6, ge=1, description="views compared with each view (support-plane test)")
     neighbour_max_deg: float = Field(60.0, gt=0, le=180, description="...at most this far around the object")
     consistency_rank: int = Field(

@@ -14,7 +14,6 @@ from ..metrics import iou
 from ..object_frame import camera_up
 from .grabcut import first_seeds, grabcut, hull_seeds
 from .hull import OUTSIDE_VOTES, carve, carve_votes, hull_depth, hull_grid
-from .outline import edge_support
 from .support_plane import find_support_plane, floor_evidence
 from .sweeps import floor_through_hull, front_evidence, occluded_region, occluder_evidence
 from .tracks import LABELS, Tracks, label_points, seed_maps, track_plane
@@ -253,14 +252,6 @@ def final_mask(colour: np.ndarray, hull: np.ndarray, background: np.ndarray, occ
     return hull & ~background & ~occluded_region(hull, colour, occluded)
 
 
-def better_outline(image: np.ndarray, candidate: np.ndarray, current: np.ndarray, opts: SegmentOptions) -> bool:
-    """Whether the outline of ``candidate`` ``(H, W)`` bool lies on the edges of ``image`` along a larger share
-    of its length than ``current``'s, by more than ``edge_choice_margin`` (:func:`.outline.edge_support`)."""
-    a = edge_support(image, candidate, opts.outline_band_px, opts.outline_contrast)
-    b = edge_support(image, current, opts.outline_band_px, opts.outline_contrast)
-    return a is not None and (b is None or a > b + opts.edge_choice_margin)
-
-
 def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixed: dict[int, np.ndarray] | None = None,
            step: Callable[[str], None] = lambda label: None) -> Segmentation:
     """Rounds of carving and GrabCut from the ``evidence``, then the final masks (see the module doc)."""
@@ -278,7 +269,6 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
     volume = np.full((opts.hull_resolution,) * 3, OUTSIDE_VOTES, np.float32)
     through: list[np.ndarray | None] = [None] * n
     fronts: list[np.ndarray | None] = [None] * n
-    alternatives: list[np.ndarray | None] = [None] * n
     for r in range(opts.rounds):
         weights = vote_weights(views, backgrounds, floors, fixed, opts, unexplained)
         volume = carve(masks, views, points, index, opts.hull_resolution, weights)
@@ -305,21 +295,15 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
         # loose first masks leave in the hull, and the next carve removes them (they are off the object in many
         # views). The last round forces the whole core again: a glossy rim that mirrors the room is lost by colour
         # only in the few views that see it at the outline, so the hull kept it, and these masks keep it too.
-        last = r == opts.rounds - 1
         new = []
         for i, v in enumerate(views):
             if i in fixed:
                 new.append(fixed[i])
             else:
-                seeding = (hulls[i], _released(occluded[i], fronts[i], through[i], opts), backgrounds[i], floors[i],
-                           opts.core_erode_px, opts.band_px, v.clipped, evidence.objects[i])
-                core = opts.final_core_fraction if last else opts.core_fraction
-                new.append(grabcut(v.image, hull_seeds(*seeding, core), opts.grabcut_iterations))
-                if last and opts.edge_choice and opts.core_fraction > opts.final_core_fraction:
-                    # the same view with the earlier rounds' share of the core left to colour, for the final masks
-                    # to choose between (better_outline)
-                    alternatives[i] = grabcut(v.image, hull_seeds(*seeding, opts.core_fraction),
-                                              opts.grabcut_iterations)
+                seeds = hull_seeds(hulls[i], _released(occluded[i], fronts[i], through[i], opts), backgrounds[i],
+                                   floors[i], opts.core_erode_px, opts.band_px, v.clipped, evidence.objects[i],
+                                   opts.core_fraction if r < opts.rounds - 1 else opts.final_core_fraction)
+                new.append(grabcut(v.image, seeds, opts.grabcut_iterations))
             step("segment")
         agreement = [iou(a, b) for a, b in zip(new, hulls)]
         change = [iou(a, b) for a, b in zip(new, masks)]
@@ -328,22 +312,14 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
         log.info("round %d: GrabCut vs hull IoU median %.3f (worst %.3f); masks changed by %.3f IoU", r + 1,
                  rounds[-1]["agreement_median"], rounds[-1]["agreement_min"], 1 - rounds[-1]["change_median"])
         masks = new
-    final, failed, chosen = [], [], []
+    final, failed = [], []
     for i, (m, h) in enumerate(zip(masks, hulls)):
         if i not in fixed:
             if core_lost(m, h, opts.core_erode_px) > opts.final_max_core_lost:
                 failed.append(views[i].name)
             m = final_mask(m, h, backgrounds[i], occluded[i], opts)
-            if alternatives[i] is not None:
-                alternative = final_mask(alternatives[i], h, backgrounds[i], occluded[i], opts)
-                if better_outline(views[i].image, alternative, m, opts):
-                    m = alternative
-                    chosen.append(views[i].name)
         final.append(m)
     if failed:
         log.info("GrabCut left out more than %.0f %% of the hull's core in %d view(s), their masks are the hull's: "
                  "%s", 100 * opts.final_max_core_lost, len(failed), ", ".join(failed))
-    if chosen:
-        log.info("the hull's core left to colour follows the photo's edges better in %d view(s): %s", len(chosen),
-                 ", ".join(chosen))
     return Segmentation(final, masks, hulls, floors, occluded, plane, volume, rounds, evidence.track_labels)

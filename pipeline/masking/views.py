@@ -98,10 +98,6 @@ class SegmentOptions:
     dark_level: int = 48
     final_reach_px: int = 1
     final_max_core_lost: float = 0.15
-    edge_choice: bool = True
-    edge_choice_margin: float = 0.1
-    outline_band_px: int = 7
-    outline_contrast: float = 2.0
     front_sweep: bool = True
     front_step: float = 0.01
     front_margin: float = 0.1

@@ -10,16 +10,8 @@ import numpy as np
 from pipeline.cameras import look_at
 from pipeline.masking.grabcut import grabcut, hull_seeds
 from pipeline.masking.hull import carve, hull_depth, hull_grid, in_hull, reproject
-from pipeline.masking.outline import edge_support
 from pipeline.masking.prior import PriorSphere, find_prior_sphere, in_sphere_frame, outgrown
-from pipeline.masking.segment import (
-    Evidence,
-    better_outline,
-    core_lost,
-    final_mask,
-    unexplained_pixels,
-    vote_weights,
-)
+from pipeline.masking.segment import Evidence, core_lost, final_mask, unexplained_pixels, vote_weights
 from pipeline.masking.support_plane import (
     exposure_gains,
     find_support_plane,
@@ -657,30 +649,3 @@ def test_a_plane_keeps_its_points_in_the_spheres_frame_and_back():
     assert abs(framed.thickness - 0.04 / radius) < 1e-12
     back = framed.unframed(centre, radius)
     assert abs(back.offset - plane.offset) < 1e-12 and abs(back.thickness - plane.thickness) < 1e-12
-
-
-def test_an_outline_on_the_objects_silhouette_follows_the_photos_edges_and_one_across_it_does_not():
-    """A brass disc on a woven red carpet (fine noise at the carpet's own level of edges): the disc's true mask
-    has its whole outline on an edge; a mask that lost the disc's top third (cut straight across the object, as
-    masks lose a part whose colours are the background's) and one that kept a wedge of carpet beside it (its
-    outline through the weave) have about a third of theirs off the photo's edges; empty and full masks have
-    no outline. The masks' last round keeps the mask whose outline is the better by a margin."""
-    rng = np.random.default_rng(0)
-    h, w = 120, 160
-    carpet = np.clip(rng.normal((150, 40, 50), 12, (h, w, 3)), 0, 255)
-    yy, xx = np.mgrid[:h, :w]
-    disc_mask = (yy - 60) ** 2 + (xx - 80) ** 2 < 35 ** 2
-    shading = (0.75 + 0.25 * (xx - 45) / 70)[..., None]
-    photo = np.where(disc_mask[..., None], np.array([190, 150, 70]) * shading, carpet).astype(np.uint8)
-    assert edge_support(photo, disc_mask, band_px=7, contrast=2.0) > 0.95
-    cut = disc_mask & (yy > 48)
-    with_wedge = disc_mask | ((xx > 80) & (xx < 135) & (yy > 60) & (yy < 100))
-    for wrong in (cut, with_wedge):
-        assert edge_support(photo, wrong, band_px=7, contrast=2.0) < 0.7
-    assert edge_support(photo, np.zeros((h, w), bool), 7, 2.0) is None
-    assert edge_support(photo, np.ones((h, w), bool), 7, 2.0) is None
-    # the last round's choice: colour's mask replaces the hull-forced one only when its outline is the better
-    opts = SegmentOptions()
-    assert better_outline(photo, disc_mask, with_wedge, opts)  # colour trimmed a wedge of carpet the hull kept
-    assert not better_outline(photo, cut, disc_mask, opts)  # colour lost part of the object
-    assert not better_outline(photo, disc_mask, disc_mask, opts)
