@@ -1,7 +1,7 @@
 """The masks' rounds (hull carving <-> GrabCut) under other settings, in minutes instead of a front end per setting:
 the evidence gathered before any hull (sphere prior, support plane, sweeps, first GrabCut) is computed once per
-capture and cached; each variant then runs only :func:`pipeline.masking.segment.refine` and is scored against the
-reference masks at the working size.
+capture and cached; each variant then runs only :func:`pipeline.masking.segment.refine_checked` and is scored
+against the reference masks at the working size.
 
     # once per capture: a front-end results folder (decode/, poses/) and its reference masks
     python bench/masks_variants.py build /tmp/bt/run_x/results --blowtorch --cache /tmp/mv/blowtorch.pkl
@@ -40,7 +40,7 @@ from pipeline.config import MasksConfig  # noqa: E402
 from pipeline.layout import CAMERAS_JSON, POSES, SPARSE, USER_MASKS  # noqa: E402
 from pipeline.masking.prior import find_prior_sphere, framed_options, in_sphere_frame  # noqa: E402
 from pipeline.masking.scale import load_view  # noqa: E402
-from pipeline.masking.segment import gather_evidence, probe_masks, refine, segment_options  # noqa: E402
+from pipeline.masking.segment import gather_evidence, probe_masks, refine_checked, segment_options  # noqa: E402
 from pipeline.masking.tracks import tracks_for_views  # noqa: E402
 from pipeline.masking.views import SegmentOptions  # noqa: E402
 from pipeline.metrics import iou  # noqa: E402
@@ -103,7 +103,7 @@ def evaluate(caches: list[Path], variant: dict[str, Any], pictures: Path | None)
         with open(cache, "rb") as f:
             c = pickle.load(f)  # noqa: S301 -- this script's own cache
         started = time.time()
-        seg = refine(c["views"], dataclasses.replace(rounds_options(c, cache), **variant), c["evidence"])
+        seg = refine_checked(c["views"], dataclasses.replace(rounds_options(c, cache), **variant), c["evidence"])
         refs = c["references"]
         scores = np.array([iou(m, r) for m, r in zip(seg.masks, refs)])
         added = np.median([(m & ~r).sum() / max(r.sum(), 1) for m, r in zip(seg.masks, refs)])
@@ -112,11 +112,14 @@ def evaluate(caches: list[Path], variant: dict[str, Any], pictures: Path | None)
         scenes.append({"capture": cache.stem, "views": len(scores), "iou_median": float(np.median(scores)),
                        "iou_worst": float(scores[worst]), "worst_view": c["views"][worst].name,
                        "added_median": float(added), "missed_median": float(missed),
-                       "seconds": round(time.time() - started, 1)})
+                       "seconds": round(time.time() - started, 1), "unexplained_beside": seg.unexplained_beside})
         every += scores.tolist()
         s = scenes[-1]
+        again = "  (segmented again: unexplained pixels beside the masks)" if (s["unexplained_beside"] or {}).get(
+            "retried") else ""
         print(f"  {s['capture']:<14} median {s['iou_median']:.3f} worst {s['iou_worst']:.3f} ({s['worst_view']}) "
-              f"added {s['added_median']:.3f} missed {s['missed_median']:.3f}  {s['seconds']:.0f} s", flush=True)
+              f"added {s['added_median']:.3f} missed {s['missed_median']:.3f}  {s['seconds']:.0f} s{again}",
+              flush=True)
         if pictures is not None:  # added in red, missed in blue
             label = json.dumps(variant, sort_keys=True).strip("{}").replace('"', "").replace(" ", "") or "defaults"
             folder = pictures / label / cache.stem

@@ -285,6 +285,12 @@ class MasksConfig(StrictModel):
         "default; 0 keeps such parts, but also a prop, a table or a contact shadow the support plane does not "
         "explain)"
     )
+    unexplained_retry_share: float = Field(
+        0.4, ge=0, description="when the masks leave out, in the median view, unexplained pixels touching them (see "
+        "unexplained_vote) amounting to more than this share of the mask's area, the rounds run again with "
+        "unexplained_vote 0 and the report says so: a part lost alike in every view (a mirror-like neck, paint "
+        "coloured like the room) leaves such pixels beside every mask. 0: never"
+    )
     unexplained_max_rate: float = Field(
         0.4, ge=0, le=1, description="unexplained pixels count (unexplained_vote) only in a capture whose likely "
         "background (the sphere's image outside the first masks) is unexplained in at most this share of its "

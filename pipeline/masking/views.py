@@ -95,6 +95,8 @@ class SegmentOptions:
     doubtful_vote: float = 0.5
     unexplained_vote: float = 1.0
     unexplained_max_rate: float = 0.4
+    unexplained_retry_share: float = 0.4
+    unexplained_reach_px: int = 2
     dark_level: int = 48
     final_reach_px: int = 1
     final_max_core_lost: float = 0.15

@@ -192,6 +192,7 @@ def run_masks(
         if len(fixed) == len(views):
             log.info("every view has a user mask: the automatic method is skipped")
             final, plane, rounds, labelled = [fixed[i] for i in range(len(views))], None, [], None
+            beside = None
             # the hull is carved in a sphere: grown while the masks reach past it, or the object is cut
             prior = find_prior_sphere(views, opts, lambda vs, o, c, r: final)
             views = [in_sphere_frame(v, prior.centre, prior.radius) for v in views]
@@ -215,6 +216,15 @@ def run_masks(
                 # colour alone loses): when the final masks reach past the sphere it grows, and they are made again.
                 prior, grown = outgrown(prior, seg.masks, views, opts, "segmentation")
             final, plane, rounds, labelled = seg.masks, seg.plane, seg.rounds, seg.track_labels
+            beside = seg.unexplained_beside
+        if beside is not None and beside["retried"]:
+            warnings.append(
+                f"the first masks left out, beside them, pixels no background explains ({100 * beside['median']:.0f} % "
+                "of a mask's area, median view): a part lost alike in every view (mirror-like, or coloured like the "
+                "room). The masks were made again counting those pixels as the object's "
+                f"({100 * (beside['median_after'] or 0.0):.0f} % left beside them); check contact_sheet.jpg: a table "
+                "or a prop next to the object may now be in them (masks.unexplained_retry_share=0 turns this off), or "
+                "give masks for a few views in CAPTURE/masks/")
 
         # The hull of the final masks: the views' agreement and the object's bounding sphere.
         points, index = hull_grid(opts.hull_resolution, plane)
@@ -298,6 +308,11 @@ def run_masks(
             "grown while the probe's masks (the user's, when every view has one), then the final masks, reached "
             "its outline (pipeline.masking.prior; each probe's 'by' says which)",
             "centre": prior.centre.tolist(), "radius": prior.radius, "probes": prior.probes}
+        report["unexplained_beside"] = None if beside is None else {
+            "what": "pixels outside the masks, touching them, that no background explains (the support plane "
+            "clearly does not, no surface outside the sphere does), as a share of the mask's area, median view: "
+            "above the threshold the masks lost a part alike in every view and were made again with those "
+            "pixels' background votes not counted (pipeline.masking.segment.refine_checked)", **beside}
         write_json(tmp / MASKS_REPORT, report)
         inputs: dict[str, Path] = {CAMERAS_JSON: poses_dir / CAMERAS_JSON, DECODE_JSON: decoded.folder / DECODE_JSON}
         inputs.update({f"user_mask:{n}": p for n, p in user_files.items()})
