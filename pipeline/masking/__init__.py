@@ -48,6 +48,10 @@ larger than the object wherever fewer than ``carve_share`` of the views see past
 hull hidden by a prop in front (GrabCut gives them to the prop). Where that view's GrabCut mask disagrees with the
 hull (it left out more than ``final_max_core_lost``, 15 %, of the hull's eroded core) its colours failed -- a
 shadowed side lost to a dark floor -- and its final mask is the hull's reprojection less certain background.
+Masks wrong alike in every view agree with their hull; a part lost that way (a mirror-like neck, paint coloured
+like the room) leaves pixels beside every mask that no background surface explains. Where they amount to more
+than ``unexplained_retry_share`` of a mask's area in the median view, the rounds run again with those pixels'
+background votes not counted (:func:`.segment.refine_checked`).
 
 Failure cases (documented in the README): an object not standing on a visible textured plane (hanging,
 held, on a textureless table: cue 2 finds nothing and the contact shadow may stay in the masks); an
