@@ -211,7 +211,8 @@ def gather_evidence(views: Sequence[View], opts: SegmentOptions, fixed: dict[int
 
 
 def segment(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.ndarray] | None = None,
-            on_step: Callable[[str], None] | None = None, tracks: Tracks | None = None) -> Segmentation:
+            on_step: Callable[[str], None] | None = None, tracks: Tracks | None = None,
+            on_retry: Callable[[], None] = lambda: None) -> Segmentation:
     """Object masks for every view (see the module doc).
 
     Args:
@@ -220,15 +221,17 @@ def segment(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.nda
         on_step: called with a short label after each unit of work (progress bars).
         tracks: the poses stage's sparse points in the views' frame and which views observed them (seeds: see
             :mod:`.tracks`), or None.
+        on_retry: called before the rounds run again (:func:`refine_checked`), e.g. to rewind a progress bar.
     """
     step = on_step or (lambda label: None)
     evidence = gather_evidence(views, opts, fixed, step, tracks)
-    return refine_checked(views, opts, evidence, fixed, step)
+    return refine_checked(views, opts, evidence, fixed, step, on_retry)
 
 
 def refine_checked(views: Sequence[View], opts: SegmentOptions, evidence: Evidence,
                    fixed: dict[int, np.ndarray] | None = None,
-                   step: Callable[[str], None] = lambda label: None) -> Segmentation:
+                   step: Callable[[str], None] = lambda label: None,
+                   on_retry: Callable[[], None] = lambda: None) -> Segmentation:
     """:func:`refine`, then a check for a part lost alike in every view: when the masks leave out, in the median
     view, unexplained pixels touching them (:func:`unexplained_beside`) of more than ``unexplained_retry_share``
     of their area, the rounds run again with ``unexplained_vote`` 0. The hull agrees with masks that are all wrong
@@ -256,6 +259,7 @@ def refine_checked(views: Sequence[View], opts: SegmentOptions, evidence: Eviden
         return seg
     log.warning("the masks leave out unexplained pixels beside them of %.0f %% of their area (median view): a part "
                 "lost in every view; segmenting again with their background votes not counted", 100 * before)
+    on_retry()
     again = refine(views, replace(opts, unexplained_vote=0.0), evidence, fixed, step)
     after = median_share(again.masks)
     again.unexplained_beside = {"median": before, "threshold": opts.unexplained_retry_share, "retried": True,

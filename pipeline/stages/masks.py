@@ -211,7 +211,8 @@ def run_masks(
                 views = [in_sphere_frame(v, prior.centre, prior.radius) for v in unframed]
                 framed_tracks = tracks.framed(prior.centre, prior.radius) if tracks is not None else None
                 seg = segment(views, framed_options(opts, prior.radius), fixed=fixed,
-                              on_step=lambda label: bar.advance(task), tracks=framed_tracks)
+                              on_step=lambda label: bar.advance(task), tracks=framed_tracks,
+                              on_retry=lambda: bar.update(task, completed=1 + 2 * n))  # the rounds again
                 # The probe's cheap masks can stop short of a part the full evidence keeps (a mirror-like neck that
                 # colour alone loses): when the final masks reach past the sphere it grows, and they are made again.
                 prior, grown = outgrown(prior, seg.masks, views, opts, "segmentation")
