@@ -126,7 +126,7 @@ def unexplained_beside(masks: Sequence[np.ndarray], unexplained: Sequence[np.nda
         _, pieces = cv2.connectedComponents(outside, connectivity=8)
         near = cv2.dilate(mask.astype(np.uint8), disc(reach_px)) > 0
         touching = np.unique(pieces[near & (pieces > 0)])
-        out.append(np.count_nonzero(np.isin(pieces, touching) & (pieces > 0)) / area)
+        out.append(np.count_nonzero(np.isin(pieces, touching)) / area)  # labels > 0 only: 0 is not a piece
     return out
 
 

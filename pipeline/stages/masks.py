@@ -203,7 +203,8 @@ def run_masks(
             # the support plane, floor and first GrabCut per view; per round the carve, GrabCut per view and, from
             # the second, the evidence against the hull per view
             n = len(views)
-            task = bar.add_task("segment", total=1 + 2 * n + opts.rounds * (1 + n) + (opts.rounds - 1) * n)
+            evidence_steps = 1 + 2 * n
+            task = bar.add_task("segment", total=evidence_steps + opts.rounds * (1 + n) + (opts.rounds - 1) * n)
             unframed = views
             while grown is not None:
                 prior = grown
@@ -212,7 +213,7 @@ def run_masks(
                 framed_tracks = tracks.framed(prior.centre, prior.radius) if tracks is not None else None
                 seg = segment(views, framed_options(opts, prior.radius), fixed=fixed,
                               on_step=lambda label: bar.advance(task), tracks=framed_tracks,
-                              on_retry=lambda: bar.update(task, completed=1 + 2 * n))  # the rounds again
+                              on_retry=lambda: bar.update(task, completed=evidence_steps))  # the rounds again
                 # The probe's cheap masks can stop short of a part the full evidence keeps (a mirror-like neck that
                 # colour alone loses): when the final masks reach past the sphere it grows, and they are made again.
                 prior, grown = outgrown(prior, seg.masks, views, opts, "segmentation")
