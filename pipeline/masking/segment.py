@@ -156,8 +156,10 @@ def gather_evidence(views: Sequence[View], opts: SegmentOptions, fixed: dict[int
     labels = label_points(tracks, sparse_plane, opts.track_far) if use_tracks else None
     plane = None
     if opts.floor:
-        use_sparse = opts.track_support_plane and sparse_plane is not None
-        plane = sparse_plane if use_sparse else find_support_plane(views, nbrs, opts, start=sparse_plane)
+        if opts.support_plane_from != "points" or sparse_plane is None:
+            plane = find_support_plane(views, nbrs, opts, start=sparse_plane)
+        if plane is None and opts.support_plane_from != "photos":
+            plane = sparse_plane
     step("support plane")
     if plane is not None:
         log.info("support plane %.3f below the centre, tilt %.1f deg from the cameras' up, %s", -plane.offset,

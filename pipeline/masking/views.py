@@ -122,7 +122,7 @@ class SegmentOptions:
     track_plane_tolerance: float = 0.02
     track_seed_px: int = 1
     track_far: float = 3.0
-    track_support_plane: bool = False
+    support_plane_from: str = "photos_or_points"
 
 
 def pixel_rays(view: View, box: tuple[int, int, int, int] | None = None) -> np.ndarray:

@@ -134,7 +134,7 @@ def test_the_plane_is_the_floor_under_the_object_and_none_when_the_floor_is_out_
     assert not (label_points(tracks, None, far=3.0) == OBJECT).any()
 
 
-def test_the_points_plane_is_the_support_plane_only_when_asked():
+def test_the_points_plane_is_the_support_plane_where_the_photos_give_none_or_when_asked():
     from dataclasses import replace
 
     from pipeline.masking.segment import gather_evidence
@@ -145,8 +145,18 @@ def test_the_points_plane_is_the_support_plane_only_when_asked():
     xyz = np.concatenate([parts["floor"], parts["ball"]])
     tracks = tracks_for_views(xyz, observers(xyz, views), [v.name for v in views])
     opts = SegmentOptions(sweep=False)
-    asked = gather_evidence(views, replace(opts, track_support_plane=True), tracks=tracks)
-    assert asked.plane is not None and asked.plane.thickness > 0 and abs(asked.plane.offset - FLOOR_Z) < 1e-6
-    assert asked.track_labels["object"] > 0 and asked.track_labels["floor"] > 0
-    default = gather_evidence(views, opts, tracks=tracks)  # photo-consistency's (blank photos: any height)
-    assert default.plane is None or default.plane.thickness == 0
+
+    def plane(source: str, photos: list[View]):
+        return gather_evidence(photos, replace(opts, support_plane_from=source), tracks=tracks).plane
+
+    def from_points(found) -> bool:
+        return found is not None and found.thickness > 0 and abs(found.offset - FLOOR_Z) < 1e-6
+
+    # blank photos: photo-consistency finds a plane (every plane explains them), which stays unless told otherwise
+    assert plane("photos", views).thickness == 0 and plane("photos_or_points", views).thickness == 0
+    assert from_points(plane("points", views))
+    # independent noise in each photo: no plane explains it, so the points' plane stands in
+    rng = np.random.default_rng(0)
+    noise = [replace(v, image=rng.integers(0, 256, v.image.shape, np.uint8)) for v in views]
+    assert plane("photos", noise) is None
+    assert from_points(plane("photos_or_points", noise))
