@@ -13,6 +13,7 @@ import numpy as np
 from ..config import MasksConfig
 from ..metrics import iou
 from ..object_frame import camera_up
+from .colour import release_room_colours
 from .grabcut import first_seeds, grabcut, hull_seeds
 from .hull import OUTSIDE_VOTES, carve, carve_votes, hull_depth, hull_grid
 from .support_plane import find_support_plane, floor_evidence
@@ -370,6 +371,10 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
                 seeds = hull_seeds(hulls[i], _released(occluded[i], fronts[i], through[i], opts), backgrounds[i],
                                    floors[i], opts.core_erode_px, opts.band_px, v.clipped, evidence.objects[i],
                                    opts.core_fraction if r < opts.rounds - 1 else opts.final_core_fraction)
+                if opts.core_colour_log_odds is not None:
+                    seeds = release_room_colours(v.image, seeds, opts.core_fraction, opts.colour_ring_px,
+                                                 opts.colour_bins, opts.core_colour_log_odds, opts.colour_min_pixels,
+                                                 opts.colour_open_px)
                 new.append(grabcut(v.image, seeds, opts.grabcut_iterations))
             step("segment")
         agreement = [iou(a, b) for a, b in zip(new, hulls)]

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from pipeline.cameras import look_at
+from pipeline.masking.colour import colour_log_odds, release_room_colours
 from pipeline.masking.grabcut import grabcut, hull_seeds
 from pipeline.masking.hull import carve, hull_depth, hull_grid, in_hull, reproject
 from pipeline.masking.prior import PriorSphere, find_prior_sphere, in_sphere_frame, outgrown
@@ -641,6 +642,45 @@ def test_grabcut_trims_a_hull_too_large_by_a_ring_of_carpet_only_when_its_core_i
             assert (forced & ~obj).sum() > 0.5 * (hull & ~obj).sum()
     assert iou(masks[0.0], obj) < 0.7
     assert iou(masks[0.2], obj) > 0.9
+
+
+def test_colour_log_odds_favour_the_region_a_colour_is_frequent_in():
+    """Background all red, object all brass: a red pixel's odds are the two regions' red counts (plus one each)
+    over their totals (plus one per bin), a brass pixel's the reverse, and a colour in neither is as likely in
+    both (equal sizes)."""
+    image = np.zeros((10, 20, 3), np.uint8)
+    image[:, :10] = (200, 30, 40)
+    image[:, 10:] = (180, 140, 60)
+    image[0, 0] = (0, 0, 255)  # a blue pixel that is in neither region
+    background, object_ = np.zeros((10, 20), bool), np.zeros((10, 20), bool)
+    background[1:, :10], object_[1:, 10:] = True, True
+    odds = colour_log_odds(image, background, object_, bins=8)
+    n = 90 + 8**3
+    assert odds[5, 5] == pytest.approx(np.log(91 / n / (1 / n)), rel=1e-5)
+    assert odds[5, 15] == pytest.approx(-odds[5, 5], rel=1e-5)
+    assert odds[0, 0] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_a_wedge_of_carpet_forced_into_the_core_is_released_by_its_colour_and_the_disc_is_not():
+    """A brass disc (radius 30 px) on a noisy red carpet and a hull that also holds a wedge of carpet beside it (a
+    gap few views see past): with the whole core forced the wedge stays object; released where its colour is far
+    likelier in the carpet around the hull than in the hull's deep core, GrabCut gives it back to the carpet and
+    keeps the disc forced."""
+    rng = np.random.default_rng(0)
+    yy, xx = np.mgrid[:120, :160]
+    obj = (yy - 60) ** 2 + (xx - 70) ** 2 < 30**2
+    hull = obj | ((xx >= 95) & (xx < 110) & (yy >= 45) & (yy < 75))
+    image = np.clip(rng.normal((150, 40, 60), 18, (120, 160, 3)), 0, 255)
+    image[obj] = np.clip(rng.normal((170, 130, 60), 12, (obj.sum(), 3)), 0, 255)
+    image = image.astype(np.uint8)
+    seeds = hull_seeds(hull, None, np.zeros_like(obj), None, 3, 4)
+    released = release_room_colours(image, seeds, 0.4, 20, 8, 3.0, 50)
+    forced = seeds == cv2.GC_FGD
+    assert (forced & ~obj).sum() > 0.5 * (hull & ~obj).sum()
+    assert (released[forced & obj] == cv2.GC_FGD).mean() > 0.999  # a brass pixel or two in the noise's tail
+    assert (released[forced & ~obj] == cv2.GC_PR_BGD).mean() > 0.8  # the rest: rare shades, left to GrabCut
+    assert iou(grabcut(image, seeds, 4), obj) < 0.95  # the wedge kept
+    assert iou(grabcut(image, released, 4), obj) > 0.98
 
 
 def test_a_plane_keeps_its_points_in_the_spheres_frame_and_back():
