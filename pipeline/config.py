@@ -274,18 +274,21 @@ class MasksConfig(StrictModel):
         "views leaves fat beside the object)"
     )
     core_colour_log_odds: float | None = Field(
-        None, gt=0, description="a pixel GrabCut would take as certain object (the hull's core, sparse "
-        "points, highlights) is only probable background where its colour is this much likelier (natural log of "
-        "the odds) among the certain background within colour_ring_px of the object than in the hull's deep core "
-        "(deeper than core_fraction): a wedge of floor or wall that few views see past is coloured like the room "
-        "beside it, a mirror's rim mostly like the rest of the mirror (pipeline.masking.colour). None: off"
+        3.0, gt=0, description="a pixel GrabCut would take as certain object (the hull's core, sparse points, "
+        "highlights) is only probable background where its colour is this much likelier (natural log of the odds, "
+        "averaged over a disc of colour_open_px) among the certain background within colour_ring_px of the object "
+        "than in the hull's deep core (deeper than core_fraction): a wedge of floor or wall that few views see past "
+        "is coloured like the room beside it, a mirror's rim mostly like the rest of the mirror "
+        "(pipeline.masking.colour; the blowtorch 0.897/0.818 -> 0.902/0.839, the random family's worst views the "
+        "same or better but one, docs/masks.md). None: off"
     )
     colour_bins: int = Field(8, ge=2, le=64, description="...colour histograms with this many bins per channel")
     colour_ring_px: int = Field(20, ge=1, description="...the background sample's reach around the object (work px)")
     colour_min_pixels: int = Field(50, ge=1, description="...no release where either sample is smaller than this")
     colour_open_px: int = Field(
-        0, ge=0, description="...only released pieces wider than a disc of this radius (a mirror's rim shows the "
-        "room beside it in a thin band)"
+        2, ge=0, description="...only released pieces wider than a disc of this radius: a glossy rim shows the room "
+        "beside it in a thin band (without: the blowtorch 0.915/0.862, but a floating torus's rim lost, worst view "
+        "0.873 -> 0.834)"
     )
     seed_radius: float = Field(
         0.3, ge=0, lt=1, description="before any hull, the central part of the unit sphere's image (this fraction of "

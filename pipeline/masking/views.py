@@ -67,11 +67,11 @@ class SegmentOptions:
     core_erode_px: int = 3
     core_fraction: float = 0.4
     final_core_fraction: float = 0.0
-    core_colour_log_odds: float | None = None
+    core_colour_log_odds: float | None = 3.0
     colour_bins: int = 8
     colour_ring_px: int = 20
     colour_min_pixels: int = 50
-    colour_open_px: int = 0
+    colour_open_px: int = 2
     band_px: int = 4
     neighbours: int = 6
     neighbour_max_deg: float = 60.0

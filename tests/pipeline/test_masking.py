@@ -683,6 +683,29 @@ def test_a_wedge_of_carpet_forced_into_the_core_is_released_by_its_colour_and_th
     assert iou(grabcut(image, released, 4), obj) > 0.98
 
 
+def test_a_thin_band_coloured_like_the_room_stays_forced_and_a_wide_wedge_does_not():
+    """A glossy rim shows the room beside it in a thin band: a 3 px ring of carpet colour inside the brass disc's
+    core is released without ``open_px`` and stays forced with it (2: pieces wider than a 5 px disc), while the
+    wedge of carpet beside the disc is released either way."""
+    rng = np.random.default_rng(1)
+    yy, xx = np.mgrid[:120, :160]
+    r2 = (yy - 60) ** 2 + (xx - 70) ** 2
+    obj = r2 < 30**2
+    band = (r2 >= 23**2) & (r2 < 26**2)
+    wedge = (xx >= 95) & (xx < 110) & (yy >= 45) & (yy < 75) & ~obj
+    image = np.clip(rng.normal((150, 40, 60), 10, (120, 160, 3)), 0, 255)
+    image[obj & ~band] = np.clip(rng.normal((170, 130, 60), 10, ((obj & ~band).sum(), 3)), 0, 255)
+    image = image.astype(np.uint8)
+    seeds = hull_seeds(obj | wedge, None, np.zeros_like(obj), None, 3, 4)
+    forced = seeds == cv2.GC_FGD
+    share = {}
+    for open_px in (0, 2):
+        released = release_room_colours(image, seeds, 0.4, 20, 8, 3.0, 50, open_px) == cv2.GC_PR_BGD
+        share[open_px] = released[band & forced].mean(), released[wedge & forced].mean()
+    assert share[0][0] > 0.8 and share[0][1] > 0.9
+    assert share[2][0] < 0.05 and share[2][1] > 0.6  # the wedge's forced part is 9 px wide: its rim is opened away
+
+
 def test_a_plane_keeps_its_points_in_the_spheres_frame_and_back():
     rng = np.random.default_rng(0)
     normal = np.array([0.1, -0.2, 1.0])
