@@ -288,7 +288,7 @@ class MasksConfig(StrictModel):
     colour_open_px: int = Field(
         2, ge=0, description="...only released pieces wider than a disc of this radius: a glossy rim shows the room "
         "beside it in a thin band (without: the blowtorch 0.915/0.862, but a floating torus's rim lost, worst view "
-        "0.873 -> 0.834)"
+        "0.873 -> 0.838)"
     )
     seed_radius: float = Field(
         0.3, ge=0, lt=1, description="before any hull, the central part of the unit sphere's image (this fraction of "
