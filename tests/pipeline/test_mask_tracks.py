@@ -147,7 +147,9 @@ def test_the_points_plane_is_the_support_plane_where_the_photos_give_none_or_whe
     opts = SegmentOptions(sweep=False)
 
     def plane(source: str, photos: list[View]):
-        return gather_evidence(photos, replace(opts, support_plane_from=source), tracks=tracks).plane
+        evidence = gather_evidence(photos, replace(opts, support_plane_from=source), tracks=tracks)
+        assert evidence.track_labels["object"] > 0 and evidence.track_labels["floor"] > 0  # whichever plane is used
+        return evidence.plane
 
     def from_points(found) -> bool:
         return found is not None and found.thickness > 0 and abs(found.offset - FLOOR_Z) < 1e-6
