@@ -108,9 +108,10 @@ def camera_up(c2w: np.ndarray) -> np.ndarray:
 def project(points: np.ndarray, c2w: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(M, 3)`` world points into ``N`` pinhole cameras -> pixels ``(N, M, 2)`` and depths ``(N, M)``."""
     w2c = np.linalg.inv(c2w)
-    cam = np.einsum("nij,mj->nmi", w2c[:, :3, :3], points) + w2c[:, None, :3, 3]
+    # matmul, not einsum: BLAS, several times faster on the hull's million voxels
+    cam = np.matmul(points, np.swapaxes(w2c[:, :3, :3], 1, 2)) + w2c[:, None, :3, 3]
     z = cam[..., 2]
-    uv = np.einsum("nij,nmj->nmi", K, cam)[..., :2] / np.where(np.abs(z) < 1e-12, 1e-12, z)[..., None]
+    uv = np.matmul(cam, np.swapaxes(K, 1, 2))[..., :2] / np.where(np.abs(z) < 1e-12, 1e-12, z)[..., None]
     return uv, z
 
 
