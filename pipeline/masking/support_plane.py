@@ -88,8 +88,9 @@ def plane_cost(view: View, others: Sequence[View], normal: np.ndarray, offset: f
     costs, count = [], np.zeros((size[1], size[0]), np.uint8)
     for other in others:
         H = plane_homography(view, other, normal, offset) @ shift
-        warped = cv2.warpPerspective(other.image, H, size, flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
-                                     borderMode=cv2.BORDER_CONSTANT, borderValue=(0, 0, 0))
+        warped = cv2.cvtColor(cv2.warpPerspective(other.rgba, H, size, flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                                  borderMode=cv2.BORDER_CONSTANT, borderValue=(0, 0, 0, 0)),
+                              cv2.COLOR_RGBA2RGB)
         visible = np.ones(other.shape, np.uint8)
         seen = cv2.warpPerspective(visible, H, size, flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
                                    borderMode=cv2.BORDER_CONSTANT, borderValue=0)
