@@ -252,6 +252,10 @@ class MasksConfig(StrictModel):
         480, ge=64, description="segmentation runs on images reduced to this longest side (masks are written at "
         "full size, their outline snapped to the photo's edges)"
     )
+    workers: int = Field(
+        0, ge=0, description="processes that segment views side by side (0: one per core this process may use; 1: "
+        "no worker processes). The masks are the same for any count; each worker holds a few views in memory"
+    )
     rounds: int = Field(3, ge=1, description="rounds of visual-hull carving <-> per-view GrabCut")
     grabcut_iterations: int = Field(4, ge=1, description="GrabCut's own iterations per view and round")
     hull_resolution: int = Field(128, ge=16, le=512, description="voxels along each side of the unit sphere's cube")

@@ -8,6 +8,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..object_frame import pixels_of
+from .parallel import MapViews, serial
 from .views import Plane, SegmentOptions, View, pixel_rays, sphere_box
 
 
@@ -27,24 +28,41 @@ OUTSIDE_VOTES = 1.0e3  # the "background votes" of voxels outside the carved reg
 
 
 def carve(masks: Sequence[np.ndarray], views: Sequence[View], points: np.ndarray, index: np.ndarray,
-          resolution: int, weights: Sequence[np.ndarray | None] | None = None) -> np.ndarray:
+          resolution: int, weights: Sequence[np.ndarray | None] | None = None, run_views: MapViews = serial
+          ) -> np.ndarray:
     """``(R, R, R)`` float32 background votes: for each voxel, in how many views that see it it lands off the
     object (:data:`OUTSIDE_VOTES` for voxels outside the region or seen by fewer than half the views). The hull
     is where the votes are below a small number: one view's mistake does not cut the object, while a voxel next
     to a thin object, off its silhouette in only the few views that look along the thin side, is still cut.
     ``weights``: per view, ``(H, W)`` float32 what a background vote from each pixel counts (None: 1 everywhere;
-    less where the vote is doubtful)."""
-    seen = np.zeros(len(points), np.int32)
-    off = np.zeros(len(points), np.float32)
-    for i, (m, v) in enumerate(zip(masks, views)):
-        inside, x, y = pixels_of(points, v.c2w, v.K, m.shape)
-        seen[inside] += 1
-        vote = ~m[y, x]
-        off[inside] += vote if weights is None or weights[i] is None else vote * weights[i][y, x]
+    less where the vote is doubtful). The views are counted in :data:`CARVE_GROUPS` groups by ``run_views``."""
+    weights = weights if weights is not None else [None] * len(views)
+    groups = [range(g, len(views), CARVE_GROUPS) for g in range(min(CARVE_GROUPS, len(views)))]
+    parts = run_views(view_votes, [(points, [masks[i] for i in g], [views[i] for i in g], [weights[i] for i in g])
+                                   for g in groups], lambda: None)
+    seen = np.sum([p[0] for p in parts], axis=0)
+    off = np.sum([p[1] for p in parts], axis=0, dtype=np.float32)
     votes = np.where(seen >= 0.5 * len(views), off, OUTSIDE_VOTES).astype(np.float32)
     volume = np.full(resolution**3, OUTSIDE_VOTES, np.float32)
     volume[index] = votes
     return volume.reshape((resolution,) * 3)
+
+
+CARVE_GROUPS = 8  # fixed, not the worker count: the sums, and so the hull, do not depend on the machine
+
+
+def view_votes(points: np.ndarray, masks: Sequence[np.ndarray], views: Sequence[View],
+               weights: Sequence[np.ndarray | None]) -> tuple[np.ndarray, np.ndarray]:
+    """For ``points`` ``(M, 3)``: in how many of ``views`` each lands inside the image ``(M,)`` int32, and its
+    background votes there ``(M,)`` float32 (see :func:`carve`)."""
+    seen = np.zeros(len(points), np.int32)
+    off = np.zeros(len(points), np.float32)
+    for m, v, w in zip(masks, views, weights):
+        inside, x, y = pixels_of(points, v.c2w, v.K, m.shape)
+        seen[inside] += 1
+        vote = ~m[y, x]
+        off[inside] += vote if w is None else vote * w[y, x]
+    return seen, off
 
 
 def carve_votes(opts: SegmentOptions, views: int) -> float:

@@ -16,6 +16,7 @@ from ..object_frame import camera_up
 from .colour import release_room_colours
 from .grabcut import first_seeds, grabcut, hull_seeds
 from .hull import OUTSIDE_VOTES, carve, carve_votes, hull_depth, hull_grid
+from .parallel import MapViews, serial
 from .support_plane import find_support_plane, floor_evidence
 from .sweeps import floor_through_hull, front_evidence, occluded_region, occluder_evidence
 from .tracks import LABELS, Tracks, label_points, seed_maps, track_plane
@@ -131,6 +132,18 @@ def unexplained_beside(masks: Sequence[np.ndarray], unexplained: Sequence[np.nda
     return out
 
 
+def view_evidence(view: View, near: Sequence[View] | None, nbrs: Sequence[View], plane: Plane | None,
+                  outside: np.ndarray, opts: SegmentOptions
+                  ) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None]:
+    """One view's ``(occluded, floor, above)`` (:func:`.sweeps.occluder_evidence` against the sweep's neighbours
+    ``near``, None: no sweep; :func:`.support_plane.floor_evidence` against ``nbrs``, None: no ``plane``)."""
+    occluded = occluder_evidence(view, near, opts) if near is not None else None
+    if plane is None:
+        return occluded, None, None
+    floor, not_floor = floor_evidence(view, nbrs, plane, outside, opts)
+    return occluded, floor, not_floor
+
+
 @dataclass
 class Evidence:
     """What :func:`gather_evidence` found before any hull (per view, at the working size)."""
@@ -147,9 +160,10 @@ class Evidence:
 
 
 def gather_evidence(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.ndarray] | None = None,
-                    step: Callable[[str], None] = lambda label: None, tracks: Tracks | None = None) -> Evidence:
+                    step: Callable[[str], None] = lambda label: None, tracks: Tracks | None = None,
+                    run_views: MapViews = serial) -> Evidence:
     """The support plane, floor, swept and sparse-point evidence per view, and the first masks from the sphere
-    prior."""
+    prior (each view's by ``run_views``)."""
     fixed = fixed or {}
     nbrs = neighbours(views, opts.neighbours, opts.neighbour_max_deg)
     use_tracks = tracks is not None and opts.tracks
@@ -170,12 +184,7 @@ def gather_evidence(views: Sequence[View], opts: SegmentOptions, fixed: dict[int
                  f"explains {100 * plane.consistent_fraction:.0f} % of the pixels around the object")
 
     spheres = [sphere_distance(v) for v in views]
-    floors: list[np.ndarray | None] = []
-    above: list[np.ndarray | None] = []
-    backgrounds = []
-    occluded: list[np.ndarray | None] = []
-    objects: list[np.ndarray | None] = []
-    near = neighbours(views, opts.sweep_neighbours, opts.neighbour_max_deg) if opts.sweep else None
+    outsides, objects = [], []
     for i, v in enumerate(views):
         outside = spheres[i] >= 1.0
         if labels is not None:
@@ -184,30 +193,22 @@ def gather_evidence(views: Sequence[View], opts: SegmentOptions, fixed: dict[int
             outside = outside | seen_background
         else:
             objects.append(None)
-        if near is not None:
-            occluded.append(occluder_evidence(v, [views[j] for j in near[i]], opts))
-        else:
-            occluded.append(None)
-        if plane is not None:
-            floor, not_floor = floor_evidence(v, [views[j] for j in nbrs[i]], plane, outside, opts)
-            floors.append(floor)
-            above.append(not_floor)
-        else:
-            floors.append(None)
-            above.append(None)
-        backgrounds.append(outside)
-        if occluded[i] is not None:
-            backgrounds[i] = backgrounds[i] | occluded[i]
-        step("floor")
+        outsides.append(outside)
+    near = neighbours(views, opts.sweep_neighbours, opts.neighbour_max_deg) if opts.sweep else None
+    found = run_views(view_evidence, [(v, [views[j] for j in near[i]] if near is not None else None,
+                                       [views[j] for j in nbrs[i]], plane, outsides[i], opts)
+                                      for i, v in enumerate(views)], lambda: step("floor"))
+    occluded = [f[0] for f in found]
+    floors = [f[1] for f in found]
+    above = [f[2] for f in found]
+    backgrounds = [o if swept is None else o | swept for o, swept in zip(outsides, occluded)]
 
-    masks = []
-    for i, v in enumerate(views):
-        if i in fixed:
-            masks.append(fixed[i])
-        else:
-            certain = backgrounds[i] if floors[i] is None else backgrounds[i] | floors[i]
-            masks.append(grabcut(v.image, first_seeds(spheres[i], certain, opts.seed_radius, above[i], objects[i]),
-                                 opts.grabcut_iterations))
+    certain = [b if f is None else b | f for b, f in zip(backgrounds, floors)]
+    first = iter(run_views(grabcut, [(v.image, first_seeds(spheres[i], certain[i], opts.seed_radius, above[i],
+                                                           objects[i]), opts.grabcut_iterations)
+                                     for i, v in enumerate(views) if i not in fixed], lambda: step("segment")))
+    masks = [fixed[i] if i in fixed else next(first) for i in range(len(views))]
+    for _ in fixed:
         step("segment")
     counts = None if labels is None else {name: int((labels == value).sum()) for name, value in LABELS.items()}
     return Evidence(plane, spheres, floors, above, backgrounds, occluded, masks, objects, counts)
@@ -215,7 +216,7 @@ def gather_evidence(views: Sequence[View], opts: SegmentOptions, fixed: dict[int
 
 def segment(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.ndarray] | None = None,
             on_step: Callable[[str], None] | None = None, tracks: Tracks | None = None,
-            on_retry: Callable[[], None] = lambda: None) -> Segmentation:
+            on_retry: Callable[[], None] = lambda: None, run_views: MapViews = serial) -> Segmentation:
     """Object masks for every view (see the module doc).
 
     Args:
@@ -225,16 +226,17 @@ def segment(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.nda
         tracks: the poses stage's sparse points in the views' frame and which views observed them (seeds: see
             :mod:`.tracks`), or None.
         on_retry: called before the rounds run again (:func:`refine_checked`), e.g. to rewind a progress bar.
+        run_views: runs each view's work (:mod:`.parallel`).
     """
     step = on_step or (lambda label: None)
-    evidence = gather_evidence(views, opts, fixed, step, tracks)
-    return refine_checked(views, opts, evidence, fixed, step, on_retry)
+    evidence = gather_evidence(views, opts, fixed, step, tracks, run_views)
+    return refine_checked(views, opts, evidence, fixed, step, on_retry, run_views)
 
 
 def refine_checked(views: Sequence[View], opts: SegmentOptions, evidence: Evidence,
                    fixed: dict[int, np.ndarray] | None = None,
                    step: Callable[[str], None] = lambda label: None,
-                   on_retry: Callable[[], None] = lambda: None) -> Segmentation:
+                   on_retry: Callable[[], None] = lambda: None, run_views: MapViews = serial) -> Segmentation:
     """:func:`refine`, then a check for a part lost alike in every view: when the masks leave out, in the median
     view, unexplained pixels touching them (:func:`unexplained_beside`) of more than ``unexplained_retry_share``
     of their area, the rounds run again with ``unexplained_vote`` 0. The hull agrees with masks that are all wrong
@@ -242,7 +244,7 @@ def refine_checked(views: Sequence[View], opts: SegmentOptions, evidence: Eviden
     every view), but no background surface explains what they left out. The check needs the support plane's
     evidence and a capture whose background is mostly explained (``unexplained_max_rate``)."""
     fixed = fixed or {}
-    seg = refine(views, opts, evidence, fixed, step)
+    seg = refine(views, opts, evidence, fixed, step, run_views)
     if opts.unexplained_vote < 1.0 or opts.unexplained_retry_share <= 0:
         return seg
     unexplained = unexplained_pixels(views, evidence, opts)
@@ -263,7 +265,7 @@ def refine_checked(views: Sequence[View], opts: SegmentOptions, evidence: Eviden
     log.warning("the masks leave out unexplained pixels beside them of %.0f %% of their area (median view): a part "
                 "lost in every view; segmenting again with their background votes not counted", 100 * before)
     on_retry()
-    again = refine(views, replace(opts, unexplained_vote=0.0), evidence, fixed, step)
+    again = refine(views, replace(opts, unexplained_vote=0.0), evidence, fixed, step, run_views)
     after = median_share(again.masks)
     again.unexplained_beside = {"median": before, "threshold": opts.unexplained_retry_share, "retried": True,
                                 "median_after": after}
@@ -272,13 +274,13 @@ def refine_checked(views: Sequence[View], opts: SegmentOptions, evidence: Eviden
     return again
 
 
-def probe_masks(tracks: Tracks | None, fixed: dict[int, np.ndarray] | None = None
+def probe_masks(tracks: Tracks | None, fixed: dict[int, np.ndarray] | None = None, run_views: MapViews = serial
                 ) -> Callable[[Sequence[View], SegmentOptions, np.ndarray, float], list[np.ndarray]]:
     """The driver :func:`.prior.find_prior_sphere` probes with: :func:`segment` on views framed by the sphere
     ``(centre, radius)``, the sparse points ``tracks`` (frame of the unframed views, or None) framed the same way."""
     def probe(views: Sequence[View], opts: SegmentOptions, centre: np.ndarray, radius: float) -> list[np.ndarray]:
-        return segment(views, opts, fixed=fixed,
-                       tracks=tracks.framed(centre, radius) if tracks is not None else None).masks
+        return segment(views, opts, fixed=fixed, tracks=tracks.framed(centre, radius) if tracks is not None else None,
+                       run_views=run_views).masks
     return probe
 
 
@@ -320,9 +322,39 @@ def final_mask(colour: np.ndarray, hull: np.ndarray, background: np.ndarray, occ
     return hull & ~background & ~occluded_region(hull, colour, occluded)
 
 
+def hull_evidence(view: View, volume: np.ndarray, max_votes: float, near: Sequence[View], around: Sequence[View],
+                  plane: Plane | None, opts: SegmentOptions) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """One view's ``(depth, front, through)``: where its rays enter the hull ``volume < max_votes``
+    (:func:`.hull.hull_depth`), and, given the support ``plane``, a prop in front of the hull
+    (:func:`.sweeps.front_evidence` against ``near``) and the floor seen through it
+    (:func:`.sweeps.floor_through_hull` against ``around``), each None when not looked for."""
+    depth = hull_depth(volume, view, max_votes)
+    front = through = None
+    if plane is not None and opts.front_sweep:
+        front = front_evidence(view, near, plane, depth, volume, max_votes, opts)
+    if plane is not None and opts.through_floor:
+        through = floor_through_hull(view, around, plane, np.isfinite(depth), opts)
+    return depth, front, through
+
+
+def round_mask(image: np.ndarray, hull: np.ndarray, released: np.ndarray | None, background: np.ndarray,
+               floor: np.ndarray | None, clipped: np.ndarray | None, objects: np.ndarray | None, core_fraction: float,
+               opts: SegmentOptions) -> np.ndarray:
+    """One view's GrabCut mask ``(H, W)`` bool in a round: seeded by the hull's reprojection ``hull``
+    (:func:`.grabcut.hull_seeds`: its core forced as object but where ``released``), the forced core's pixels
+    coloured like the room beside the object released (:func:`.colour.release_room_colours`)."""
+    seeds = hull_seeds(hull, released, background, floor, opts.core_erode_px, opts.band_px, clipped, objects,
+                       core_fraction)
+    if opts.core_colour_log_odds is not None:
+        seeds = release_room_colours(image, seeds, opts.core_fraction, opts.colour_ring_px, opts.colour_bins,
+                                     opts.core_colour_log_odds, opts.colour_min_pixels, opts.colour_open_px)
+    return grabcut(image, seeds, opts.grabcut_iterations)
+
+
 def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixed: dict[int, np.ndarray] | None = None,
-           step: Callable[[str], None] = lambda label: None) -> Segmentation:
-    """Rounds of carving and GrabCut from the ``evidence``, then the final masks (see the module doc)."""
+           step: Callable[[str], None] = lambda label: None, run_views: MapViews = serial) -> Segmentation:
+    """Rounds of carving and GrabCut from the ``evidence``, then the final masks (see the module doc); each view's
+    work by ``run_views``."""
     fixed = fixed or {}
     n = len(views)
     plane, backgrounds, occluded = evidence.plane, evidence.backgrounds, evidence.occluded
@@ -339,21 +371,19 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
     fronts: list[np.ndarray | None] = [None] * n
     for r in range(opts.rounds):
         weights = vote_weights(views, backgrounds, floors, fixed, opts, unexplained)
-        volume = carve(masks, views, points, index, opts.hull_resolution, weights)
+        volume = carve(masks, views, points, index, opts.hull_resolution, weights, run_views)
         votes = carve_votes(opts, n)
-        depths = [hull_depth(volume, v, votes - 0.5) for v in views]
-        hulls = [np.isfinite(d) for d in depths]
         step("carve")
+        # Props in front of the object inside the sphere are found anew against each round's hull, from the second
+        # (the sphere prior's masks make a hull too loose to have much in front of it).
+        found = run_views(hull_evidence, [(v, volume, votes - 0.5, [views[j] for j in near[i]],
+                                           [views[j] for j in around[i]], plane if r > 0 and i not in fixed else None,
+                                           opts) for i, v in enumerate(views)],
+                          (lambda: step("evidence against the hull")) if r > 0 else (lambda: None))
+        hulls = [np.isfinite(f[0]) for f in found]
         if r > 0:
-            for i, v in enumerate(views):
-                if plane is not None and i not in fixed and opts.front_sweep:
-                    # Props in front of the object inside the sphere, found anew against each round's hull (not the
-                    # first round's: the sphere prior's masks make a hull too loose to have much in front of it).
-                    fronts[i] = front_evidence(v, [views[j] for j in near[i]], plane, depths[i], volume, votes - 0.5,
-                                               opts)
-                if plane is not None and i not in fixed and opts.through_floor:
-                    through[i] = floor_through_hull(v, [views[j] for j in around[i]], plane, hulls[i], opts)
-                step("evidence against the hull")
+            fronts = [f[1] for f in found]
+            through = [f[2] for f in found]
             _log_found(r, "a prop in front of the hull", views, fronts)
             _log_found(r, "the floor seen through the hull", views, through)
         # Both are certain background: no mask keeps them, and the floor confirms the view's votes in the next carve.
@@ -363,19 +393,12 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
         # loose first masks leave in the hull, and the next carve removes them (they are off the object in many
         # views). The last round forces the whole core again: a glossy rim that mirrors the room is lost by colour
         # only in the few views that see it at the outline, so the hull kept it, and these masks keep it too.
-        new = []
-        for i, v in enumerate(views):
-            if i in fixed:
-                new.append(fixed[i])
-            else:
-                seeds = hull_seeds(hulls[i], _released(occluded[i], fronts[i], through[i], opts), backgrounds[i],
-                                   floors[i], opts.core_erode_px, opts.band_px, v.clipped, evidence.objects[i],
-                                   opts.core_fraction if r < opts.rounds - 1 else opts.final_core_fraction)
-                if opts.core_colour_log_odds is not None:
-                    seeds = release_room_colours(v.image, seeds, opts.core_fraction, opts.colour_ring_px,
-                                                 opts.colour_bins, opts.core_colour_log_odds, opts.colour_min_pixels,
-                                                 opts.colour_open_px)
-                new.append(grabcut(v.image, seeds, opts.grabcut_iterations))
+        core = opts.core_fraction if r < opts.rounds - 1 else opts.final_core_fraction
+        made = iter(run_views(round_mask, [(v.image, hulls[i], _released(occluded[i], fronts[i], through[i], opts),
+                                            backgrounds[i], floors[i], v.clipped, evidence.objects[i], core, opts)
+                                           for i, v in enumerate(views) if i not in fixed], lambda: step("segment")))
+        new = [fixed[i] if i in fixed else next(made) for i in range(n)]
+        for _ in fixed:
             step("segment")
         agreement = [iou(a, b) for a, b in zip(new, hulls)]
         change = [iou(a, b) for a, b in zip(new, masks)]

@@ -87,6 +87,7 @@ from ..layout import (
 )
 from ..log import progress
 from ..masking.hull import carve, carve_votes, hull_grid, reproject
+from ..masking.parallel import view_workers
 from ..masking.prior import (
     PriorSphere,
     find_prior_sphere,
@@ -177,7 +178,7 @@ def run_masks(
     scale = min(1.0, config.work_size / longest)
     opts = segment_options(config)
     warnings: list[str] = []
-    with progress() as bar:
+    with progress() as bar, view_workers(config.workers) as run_views:
         load = bar.add_task("load views", total=len(names))
         views, fixed, areas = [], {}, {}
         for i, cam in enumerate(cameras.cameras):  # one full-size photo in memory at a time
@@ -198,7 +199,7 @@ def run_masks(
             views = [in_sphere_frame(v, prior.centre, prior.radius) for v in views]
         else:
             probe = bar.add_task("sphere prior", total=None)
-            grown: PriorSphere | None = find_prior_sphere(views, opts, probe_masks(tracks, fixed))
+            grown: PriorSphere | None = find_prior_sphere(views, opts, probe_masks(tracks, fixed, run_views))
             bar.update(probe, total=1, completed=1)
             # the support plane, floor and first GrabCut per view; per round the carve, GrabCut per view and, from
             # the second, the evidence against the hull per view
@@ -213,7 +214,8 @@ def run_masks(
                 framed_tracks = tracks.framed(prior.centre, prior.radius) if tracks is not None else None
                 seg = segment(views, framed_options(opts, prior.radius), fixed=fixed,
                               on_step=lambda label: bar.advance(task), tracks=framed_tracks,
-                              on_retry=lambda: bar.update(task, completed=evidence_steps))  # the rounds again
+                              on_retry=lambda: bar.update(task, completed=evidence_steps),  # the rounds again
+                              run_views=run_views)
                 # The probe's cheap masks can stop short of a part the full evidence keeps (a mirror-like neck that
                 # colour alone loses): when the final masks reach past the sphere it grows, and they are made again.
                 prior, grown = outgrown(prior, seg.masks, views, opts, "segmentation")
@@ -230,7 +232,7 @@ def run_masks(
 
         # The hull of the final masks: the views' agreement and the object's bounding sphere.
         points, index = hull_grid(opts.hull_resolution, plane)
-        votes = carve(final, views, points, index, opts.hull_resolution)
+        votes = carve(final, views, points, index, opts.hull_resolution, run_views=run_views)
         hull_task = bar.add_task("hull", total=len(views))
         hulls = []
         for v in views:

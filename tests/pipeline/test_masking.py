@@ -14,6 +14,7 @@ from pipeline.cameras import look_at
 from pipeline.masking.colour import colour_log_odds, release_room_colours
 from pipeline.masking.grabcut import grabcut, hull_seeds
 from pipeline.masking.hull import carve, hull_depth, hull_grid, in_hull, reproject
+from pipeline.masking.parallel import view_workers
 from pipeline.masking.prior import PriorSphere, find_prior_sphere, in_sphere_frame, outgrown
 from pipeline.masking.segment import (
     Evidence,
@@ -21,6 +22,7 @@ from pipeline.masking.segment import (
     final_mask,
     refine,
     refine_checked,
+    segment,
     unexplained_beside,
     unexplained_pixels,
     vote_weights,
@@ -775,3 +777,17 @@ def test_masks_that_lose_a_mirror_neck_in_every_view_are_made_again_keeping_it()
     assert off.unexplained_beside is None
     noisy, _, _ = evidence_of_a_mirror_neck(views, 0.6)  # a carpet's weave: nothing is explained
     assert refine_checked(views, opts, noisy).unexplained_beside is None
+
+
+def test_worker_processes_make_the_same_masks_as_one_process():
+    """Each view's sweeps, evidence against the hull and GrabCut run in worker processes and the carve's view
+    groups are summed in a fixed order: the masks do not depend on how many processes made them."""
+    views, _, _, _ = prop_in_front_views()
+    opts = SegmentOptions(hull_resolution=64, rounds=2)
+    alone = segment(views, opts)
+    with view_workers(2) as run_views:
+        pooled = segment(views, opts, run_views=run_views)
+    assert sum(np.count_nonzero(m) for m in alone.masks) > 0.02 * sum(m.size for m in alone.masks)
+    for a, b in zip(alone.masks + alone.hull_masks, pooled.masks + pooled.hull_masks):
+        assert np.array_equal(a, b)
+    assert np.array_equal(alone.volume, pooled.volume)

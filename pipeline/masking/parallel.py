@@ -1,0 +1,70 @@
+"""Per-view work of the masks in worker processes. Every view's sweeps, evidence against the hull and GrabCut are
+independent of the other views' in the same step, and they are many small OpenCV and numpy calls that hold
+Python's lock between them: threads do not overlap them, processes do.
+
+A :data:`MapViews` runs ``fn(*task)`` for each task and returns the results in order, calling ``done`` after each;
+:func:`serial` does it here, :func:`view_workers` in a pool. Results are the same either way: each call depends
+only on its task (GrabCut seeds its own random generator)."""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from contextlib import contextmanager
+from typing import Any, TypeVar
+
+import cv2
+from threadpoolctl import threadpool_limits
+
+T = TypeVar("T")
+MapViews = Callable[[Callable[..., T], Sequence[tuple[Any, ...]], Callable[[], None]], list[T]]
+
+
+def serial(fn: Callable[..., T], tasks: Sequence[tuple[Any, ...]], done: Callable[[], None] = lambda: None
+           ) -> list[T]:
+    """``[fn(*task) for task in tasks]``, calling ``done`` after each."""
+    out = []
+    for task in tasks:
+        out.append(fn(*task))
+        done()
+    return out
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its affinity, e.g. a Slurm allocation), not the machine's."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
+def _one_thread() -> None:
+    # As many processes as cores already: OpenCV's and BLAS's own threads in each would only contend -- OpenBLAS's
+    # spin while they wait, which made two workers on two cores slower than one process.
+    cv2.setNumThreads(1)
+    threadpool_limits(1)
+
+
+@contextmanager
+def view_workers(workers: int) -> Iterator[MapViews]:
+    """A :data:`MapViews` over ``workers`` processes (0: :func:`usable_cores`; 1: :func:`serial`, no pool), shut
+    down on leaving. The processes are started by a fork server, not forked from this process: it may hold
+    threads (progress bars, PyTorch) that a fork would copy mid-lock."""
+    count = workers or usable_cores()
+    if count <= 1:
+        yield serial
+        return
+    context = multiprocessing.get_context("forkserver")
+    with ProcessPoolExecutor(count, mp_context=context, initializer=_one_thread) as pool:
+        def run(fn: Callable[..., T], tasks: Sequence[tuple[Any, ...]], done: Callable[[], None] = lambda: None
+                ) -> list[T]:
+            futures = [pool.submit(fn, *task) for task in tasks]
+            out = []
+            for future in futures:
+                out.append(future.result())
+                done()
+            return out
+
+        yield run
