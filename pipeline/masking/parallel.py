@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
@@ -40,31 +41,43 @@ def usable_cores() -> int:
         return os.cpu_count() or 1
 
 
-def _one_thread() -> None:
+def _worker_start() -> None:
     # As many processes as cores already: OpenCV's and BLAS's own threads in each would only contend -- OpenBLAS's
     # spin while they wait, which made two workers on two cores slower than one process.
     cv2.setNumThreads(1)
     threadpool_limits(1)
+    # Ctrl-C reaches the whole process group: the stage stops its workers itself (below), without a traceback
+    # from each of them.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 @contextmanager
 def view_workers(workers: int) -> Iterator[MapViews]:
     """A :data:`MapViews` over ``workers`` processes (0: :func:`usable_cores`; 1: :func:`serial`, no pool), shut
     down on leaving. The processes are started by a fork server, not forked from this process: it may hold
-    threads (progress bars, PyTorch) that a fork would copy mid-lock."""
+    threads (progress bars, PyTorch) that a fork would copy mid-lock. When the stage stops (Ctrl-C, SIGTERM, an
+    error) the workers are ended at once, not left to finish the queued views."""
     count = workers or usable_cores()
     if count <= 1:
         yield serial
         return
-    context = multiprocessing.get_context("forkserver")
-    with ProcessPoolExecutor(count, mp_context=context, initializer=_one_thread) as pool:
-        def run(fn: Callable[..., T], tasks: Sequence[tuple[Any, ...]], done: Callable[[], None] = lambda: None
-                ) -> list[T]:
-            futures = [pool.submit(fn, *task) for task in tasks]
-            out = []
-            for future in futures:
-                out.append(future.result())
-                done()
-            return out
+    pool = ProcessPoolExecutor(count, mp_context=multiprocessing.get_context("forkserver"), initializer=_worker_start)
 
+    def run(fn: Callable[..., T], tasks: Sequence[tuple[Any, ...]], done: Callable[[], None] = lambda: None
+            ) -> list[T]:
+        futures = [pool.submit(fn, *task) for task in tasks]
+        out = []
+        for future in futures:
+            out.append(future.result())
+            done()
+        return out
+
+    try:
         yield run
+    except BaseException:
+        # the executor has no public way to end running tasks before Python 3.14's terminate_workers
+        for process in list((getattr(pool, "_processes", None) or {}).values()):
+            process.terminate()
+        pool.shutdown(wait=True, cancel_futures=True)
+        raise
+    pool.shutdown(wait=True)

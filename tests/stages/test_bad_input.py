@@ -272,6 +272,69 @@ def test_sigterm_stops_a_stage_that_loaded_pycolmap_like_ctrl_c(stage, signal_na
     assert not (results / stage).exists()
 
 
+# `orca ARGS` whose masks workers each write their PID to the file $ORCA_HELD and wait in their first view's sweeps.
+# The fork server imports this script as its main module: the patch reaches every worker, the guard keeps `orca`
+# itself from running there.
+_HELD_WORKERS = """\
+import os, sys, time
+
+import pipeline.masking.segment as segment
+
+
+def hold(*args, **kwargs):
+    with open(os.environ["ORCA_HELD"], "a") as f:
+        f.write(f"{os.getpid()}\\n")
+    time.sleep(600)
+
+
+segment.view_evidence = hold
+if __name__ == "__main__":
+    from pipeline.cli import main
+
+    sys.exit(main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.parametrize("group", [False, True])
+def test_sigterm_ends_the_masks_workers_with_the_stage(group, tiny_capture, tiny_decode, tmp_path):
+    """The masks stage's views run in worker processes (masks.workers): SIGTERM -- to the stage alone, or to its
+    whole process group as Slurm and Snakemake send it -- stops the stage at once (not after the queued views,
+    nor after the running ones: each holds for 10 minutes here), leaves no temporary folder and no worker behind."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+    import time
+
+    from pipeline.config import PosesConfig
+    from pipeline.stages.poses import run_poses
+
+    if not Path("/proc/self/status").exists():
+        pytest.skip("reads the workers' state from /proc (Linux)")
+    capture = _capture_copy(tiny_capture, tmp_path / "capture")
+    shutil.copy(capture / "ground_truth" / "cameras.json", capture / "cameras.json")  # known cameras: no SfM
+    results = tmp_path / "results"
+    run_poses(capture, tiny_decode, results / "poses", PosesConfig())
+    marker = tmp_path / "held"
+    script = tmp_path / "held_workers.py"
+    script.write_text(_HELD_WORKERS)
+    args = ["masks", capture, "--poses", results / "poses", "--decode", tiny_decode, "--out", results / "masks",
+            "--set", "workers=2"]
+    proc = subprocess.Popen([sys.executable, str(script), *map(str, args)], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, env={**os.environ, "ORCA_HELD": str(marker)},
+                            start_new_session=group)
+    output = _signal_when(proc, lambda: marker.exists() and len(marker.read_text().split()) == 2,
+                          "both workers inside a view", group=group)
+    assert proc.returncode == 143, output[-3000:]
+    _stopped_cleanly(output, results)
+    assert not (results / "masks").exists()
+    time.sleep(1)
+    for pid in map(int, marker.read_text().split()):
+        # ended: gone, or a zombie (its parent, the fork server, ended too, and a container's PID 1 may never reap)
+        status = Path(f"/proc/{pid}/status")
+        assert not status.exists() or "State:\tZ" in status.read_text(), f"worker {pid} still runs"
+
+
 def _colmap_model(cameras_json: Path, folder: Path) -> Path:
     """A COLMAP text model of these cameras and of 8 points around the object that every photo sees: what
     `orca train --points` reads (the poses stage's sparse/), without the time SfM takes."""
