@@ -55,13 +55,16 @@ def _worker_start() -> None:
 def view_workers(workers: int) -> Iterator[MapViews]:
     """A :data:`MapViews` over ``workers`` processes (0: :func:`usable_cores`; 1: :func:`serial`, no pool), shut
     down on leaving. The processes are started by a fork server, not forked from this process: it may hold
-    threads (progress bars, PyTorch) that a fork would copy mid-lock. When the stage stops (Ctrl-C, SIGTERM, an
-    error) the workers are ended at once, not left to finish the queued views."""
+    threads (progress bars, PyTorch) that a fork would copy mid-lock. The fork server imports the main script, as
+    Python's ``spawn`` does: a script that runs the masks with workers needs ``if __name__ == "__main__":``. When
+    the stage stops (Ctrl-C, SIGTERM, an error) the workers are ended at once, not left to finish the queued
+    views."""
     count = workers or usable_cores()
     if count <= 1:
         yield serial
         return
-    pool = ProcessPoolExecutor(count, mp_context=multiprocessing.get_context("forkserver"), initializer=_worker_start)
+    method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"  # Windows: spawn
+    pool = ProcessPoolExecutor(count, mp_context=multiprocessing.get_context(method), initializer=_worker_start)
 
     def run(fn: Callable[..., T], tasks: Sequence[tuple[Any, ...]], done: Callable[[], None] = lambda: None
             ) -> list[T]:
