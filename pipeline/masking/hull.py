@@ -27,6 +27,9 @@ def hull_grid(resolution: int, plane: Plane | None) -> tuple[np.ndarray, np.ndar
 OUTSIDE_VOTES = 1.0e3  # the "background votes" of voxels outside the carved region
 
 
+CARVE_GROUPS = 8  # fixed, not the worker count: the sums, and so the hull, do not depend on the machine
+
+
 def carve(masks: Sequence[np.ndarray], views: Sequence[View], points: np.ndarray, index: np.ndarray,
           resolution: int, weights: Sequence[np.ndarray | None] | None = None, run_views: MapViews = serial
           ) -> np.ndarray:
@@ -46,9 +49,6 @@ def carve(masks: Sequence[np.ndarray], views: Sequence[View], points: np.ndarray
     volume = np.full(resolution**3, OUTSIDE_VOTES, np.float32)
     volume[index] = votes
     return volume.reshape((resolution,) * 3)
-
-
-CARVE_GROUPS = 8  # fixed, not the worker count: the sums, and so the hull, do not depend on the machine
 
 
 def view_votes(points: np.ndarray, masks: Sequence[np.ndarray], views: Sequence[View],
