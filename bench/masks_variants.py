@@ -38,6 +38,7 @@ from bench.blowtorch import DATASET, commit, machine, poses_undistortion, refere
 from pipeline.cameras import load_cameras  # noqa: E402
 from pipeline.config import MasksConfig  # noqa: E402
 from pipeline.layout import CAMERAS_JSON, POSES, SPARSE, USER_MASKS  # noqa: E402
+from pipeline.masking.parallel import MapViews, view_workers  # noqa: E402
 from pipeline.masking.prior import find_prior_sphere, framed_options, in_sphere_frame  # noqa: E402
 from pipeline.masking.scale import load_view  # noqa: E402
 from pipeline.masking.segment import gather_evidence, probe_masks, refine_checked, segment_options  # noqa: E402
@@ -50,7 +51,8 @@ from pipeline.sparse_depth import load_sparse_points  # noqa: E402
 RESULTS = Path(__file__).parent / "results" / "masks_variants.jsonl"
 
 
-def build(results: Path, cache: Path, reference: Path | None, overrides: dict[str, Any]) -> None:
+def build(results: Path, cache: Path, reference: Path | None, overrides: dict[str, Any], run_views: MapViews
+          ) -> None:
     """The views, options, evidence and reference masks (at the working size) of the front end in ``results``
     (``reference``: a folder of ``<name>.png``; None: the blowtorch's, resampled like the photos)."""
     cameras = load_cameras(results / POSES / CAMERAS_JSON)
@@ -65,11 +67,11 @@ def build(results: Path, cache: Path, reference: Path | None, overrides: dict[st
         tracks = tracks_for_views(points.xyz, points.observers, names) if len(points.xyz) else None
     opts = segment_options(config)
     started = time.time()
-    prior = find_prior_sphere(views, opts, probe_masks(tracks))
+    prior = find_prior_sphere(views, opts, probe_masks(tracks, run_views=run_views))
     views = [in_sphere_frame(v, prior.centre, prior.radius) for v in views]
     opts = framed_options(opts, prior.radius)
     framed = tracks.framed(prior.centre, prior.radius) if tracks is not None else None
-    evidence = gather_evidence(views, opts, {}, tracks=framed)
+    evidence = gather_evidence(views, opts, {}, tracks=framed, run_views=run_views)
     undistortion = poses_undistortion(results) if reference is None else None
     refs = []
     for cam, view in zip(cameras.cameras, views):
@@ -96,14 +98,16 @@ def rounds_options(c: dict[str, Any], cache: Path) -> SegmentOptions:
     return framed_options(segment_options(MasksConfig(**c["overrides"])), c["prior_radius"])
 
 
-def evaluate(caches: list[Path], variant: dict[str, Any], pictures: Path | None) -> dict[str, Any]:
+def evaluate(caches: list[Path], variant: dict[str, Any], pictures: Path | None, run_views: MapViews
+             ) -> dict[str, Any]:
     """Every cache's rounds under ``variant``; per capture and over all views."""
     scenes, every = [], []
     for cache in caches:
         with open(cache, "rb") as f:
             c = pickle.load(f)  # noqa: S301 -- this script's own cache
         started = time.time()
-        seg = refine_checked(c["views"], dataclasses.replace(rounds_options(c, cache), **variant), c["evidence"])
+        seg = refine_checked(c["views"], dataclasses.replace(rounds_options(c, cache), **variant), c["evidence"],
+                             run_views=run_views)
         refs = c["references"]
         scores = np.array([iou(m, r) for m, r in zip(seg.masks, refs)])
         added = np.median([(m & ~r).sum() / max(r.sum(), 1) for m, r in zip(seg.masks, refs)])
@@ -154,14 +158,21 @@ def main() -> None:
     e.add_argument("--pictures", type=Path, default=None, help="write each view's errors here")
     e.add_argument("--results", type=Path, default=RESULTS)
     e.add_argument("--no-record", action="store_true")
+    parser.add_argument("--workers", type=int, default=0, help="processes per view's work (0: one per core)")
     args = parser.parse_args()
-    if args.mode == "build":
-        overrides = {k: json.loads(v) for k, v in (o.split("=", 1) for o in args.overrides)}
-        build(args.results, args.cache, None if args.blowtorch else args.reference, overrides)
-        return
+    with view_workers(args.workers) as run_views:
+        if args.mode == "build":
+            overrides = {k: json.loads(v) for k, v in (o.split("=", 1) for o in args.overrides)}
+            build(args.results, args.cache, None if args.blowtorch else args.reference, overrides, run_views)
+            return
+        variants(args, run_views)
+
+
+def variants(args: argparse.Namespace, run_views: MapViews) -> None:
+    """Each ``--variant`` over the caches, recorded unless ``--no-record``."""
     code = commit()  # the code this process imported, whatever the tree holds when a variant ends
     for text in args.variant or ["{}"]:
-        record = evaluate(args.caches, json.loads(text), args.pictures)
+        record = evaluate(args.caches, json.loads(text), args.pictures, run_views)
         if not args.no_record:
             record = {"date": datetime.now().isoformat(timespec="seconds"), "machine": machine(), "commit": code,
                       **record}
