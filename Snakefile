@@ -56,8 +56,9 @@ SET = " ".join(f"--set {shlex.quote(str(o))}" for o in OVERRIDES)
 RESOURCES = config["resources"]
 
 # Threads per job: Slurm's --cpus-per-task; a local run lowers them to --cores. SfM's threads and the PyTorch
-# stages' (training, rendering) make use of a few cores each.
+# stages' (training, rendering) make use of a few cores each; the masks' worker processes of one each.
 POSES_THREADS = 4
+MASKS_THREADS = 8
 TORCH_THREADS = 8
 
 # results/<capture>/benchmarks/<stage>.tsv: each job's wall time and memory (Snakemake's benchmark files)
@@ -233,9 +234,10 @@ rule masks:
         log_of(layout.MASKS),
     benchmark:
         benchmark_of(layout.MASKS),
+    threads: MASKS_THREADS
     shell:
         "{ORCA} masks {CAPTURES_DIR}/{wildcards.capture} --poses {input.poses} --decode {input.decode} "
-        "--out {output} --preset {PRESET} {SET} > {log} 2>&1"
+        "--out {output} --preset {PRESET} --set masks.workers={threads} {SET} > {log} 2>&1"
 
 
 rule train:
