@@ -112,7 +112,7 @@ class StageRun:
 
 def run_stage(stage: str, capture: Path, results: Path, overrides: Sequence[str] = ()) -> StageRun:
     """``orca <stage>`` on ``capture`` with its inputs and output in ``results/<stage>`` (a subprocess of the
-    installed CLI); its wall time and peak RSS (``wait4``'s, the process and the children it waited for)."""
+    installed CLI); its wall time and peak memory (:func:`timed`)."""
     inputs = {DECODE: [], POSES: ["--decode", results / DECODE], MASKS: ["--decode", results / DECODE,
                                                                       "--poses", results / POSES]}[stage]
     cmd = [str(ORCA), stage, str(capture), "--out", str(results / stage), *map(str, inputs)]
@@ -123,15 +123,38 @@ def run_stage(stage: str, capture: Path, results: Path, overrides: Sequence[str]
     return StageRun(stage, seconds, peak_mb, returncode, log.read_text(encoding="utf-8"))
 
 
-def timed(cmd: Sequence[str], log: Path) -> tuple[float, float, int]:
-    """Run ``cmd`` with its stdout and stderr in ``log``: its wall time (s), peak RSS (MB; ``wait4``'s, the process
-    and the children it waited for) and exit code."""
+def timed(cmd: Sequence[str], log: Path, every_s: float = 0.2) -> tuple[float, float, int]:
+    """Run ``cmd`` with its stdout and stderr in ``log``: its wall time (s), peak memory (MB) and exit code. The
+    peak is the larger of ``wait4``'s (the process and the children it waited for) and the largest sum of the
+    resident memory of the process and all its descendants seen every ``every_s``: the masks stage's worker
+    processes run beside it, started by a fork server, and ``wait4`` would see neither."""
+    import threading
+
+    import psutil  # snakemake's dependency
+
     started = time.perf_counter()
+    peak_tree = 0
     with open(log, "w", encoding="utf-8") as out:
         proc = subprocess.Popen(list(cmd), stdout=out, stderr=subprocess.STDOUT)
+        done = threading.Event()
+
+        def sample() -> None:
+            nonlocal peak_tree
+            while not done.wait(every_s):
+                try:
+                    root = psutil.Process(proc.pid)
+                    tree = [root, *root.children(recursive=True)]
+                    peak_tree = max(peak_tree, sum(p.memory_info().rss for p in tree if p.is_running()))
+                except psutil.Error:  # a process ended between the listing and the reading
+                    continue
+
+        sampler = threading.Thread(target=sample, daemon=True)
+        sampler.start()
         _, status, usage = os.wait4(proc.pid, 0)
+        done.set()
+        sampler.join()
     proc.returncode = os.waitstatus_to_exitcode(status)  # reaped here: Popen must not wait for it again
-    return time.perf_counter() - started, usage.ru_maxrss / 1024, proc.returncode
+    return time.perf_counter() - started, max(usage.ru_maxrss / 1024, peak_tree / 2**20), proc.returncode
 
 
 def run_front_end(capture: Path, results: Path, overrides: Sequence[str] = (),
