@@ -11,15 +11,19 @@ from __future__ import annotations
 import multiprocessing
 import os
 import signal
+import threading
+import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any, TypeVar
 
 import cv2
 from threadpoolctl import threadpool_limits
 
 T = TypeVar("T")
+ORPHAN_CHECK_S = 1.0  # how often a worker looks whether the stage that started it still runs
 MapViews = Callable[[Callable[..., T], Sequence[tuple[Any, ...]], Callable[[], None]], list[T]]
 
 
@@ -41,7 +45,7 @@ def usable_cores() -> int:
         return os.cpu_count() or 1
 
 
-def _worker_start() -> None:
+def _worker_start(stage: int) -> None:
     # As many processes as cores already: OpenCV's and BLAS's own threads in each would only contend -- OpenBLAS's
     # spin while they wait, which made two workers on two cores slower than one process.
     cv2.setNumThreads(1)
@@ -49,6 +53,28 @@ def _worker_start() -> None:
     # Ctrl-C reaches the whole process group: the stage stops its workers itself (below), without a traceback
     # from each of them.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    threading.Thread(target=_end_with, args=(stage,), daemon=True).start()
+
+
+def _end_with(stage: int) -> None:
+    # A stage killed outright (SIGKILL, the OOM killer, a script without a SIGTERM handler) cannot end its workers:
+    # each ends itself once the stage is gone, instead of computing its queued views and then waiting forever.
+    while _running(stage):
+        time.sleep(ORPHAN_CHECK_S)
+    os._exit(1)
+
+
+def _running(pid: int) -> bool:
+    """Whether process ``pid`` runs: it exists and, where /proc tells, is no zombie (killed, not yet reaped)."""
+    try:
+        os.kill(pid, 0)
+    except (ProcessLookupError, PermissionError):  # gone (or its pid is someone else's now)
+        return False
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:  # no /proc (macOS)
+        return True
+    return stat[stat.rindex(")") + 2] != "Z"  # the state follows the command's name in parentheses
 
 
 @contextmanager
@@ -64,7 +90,8 @@ def view_workers(workers: int) -> Iterator[MapViews]:
         yield serial
         return
     method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"  # Windows: spawn
-    pool = ProcessPoolExecutor(count, mp_context=multiprocessing.get_context(method), initializer=_worker_start)
+    pool = ProcessPoolExecutor(count, mp_context=multiprocessing.get_context(method), initializer=_worker_start,
+                               initargs=(os.getpid(),))
 
     def run(fn: Callable[..., T], tasks: Sequence[tuple[Any, ...]], done: Callable[[], None] = lambda: None
             ) -> list[T]:

@@ -295,16 +295,13 @@ if __name__ == "__main__":
 """
 
 
-@pytest.mark.parametrize("group", [False, True])
-def test_sigterm_ends_the_masks_workers_with_the_stage(group, tiny_capture, tiny_decode, tmp_path):
-    """The masks stage's views run in worker processes (masks.workers): SIGTERM -- to the stage alone, or to its
-    whole process group as Slurm and Snakemake send it -- stops the stage at once (not after the queued views,
-    nor after the running ones: each holds for 10 minutes here), leaves no temporary folder and no worker behind."""
+def _held_masks_workers(tiny_capture, tiny_decode, tmp_path, group: bool = False):
+    """`orca masks` with two workers, each held in its first view (:data:`_HELD_WORKERS`): the process, its
+    results folder and the workers' PIDs (a callable: empty until both hold)."""
     import os
     import shutil
     import subprocess
     import sys
-    import time
 
     from pipeline.config import PosesConfig
     from pipeline.stages.poses import run_poses
@@ -323,16 +320,47 @@ def test_sigterm_ends_the_masks_workers_with_the_stage(group, tiny_capture, tiny
     proc = subprocess.Popen([sys.executable, str(script), *map(str, args)], stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True, env={**os.environ, "ORCA_HELD": str(marker)},
                             start_new_session=group)
-    output = _signal_when(proc, lambda: marker.exists() and len(marker.read_text().split()) == 2,
-                          "both workers inside a view", group=group)
+
+    def workers() -> list[int]:
+        pids = marker.read_text().split() if marker.exists() else []
+        return [int(p) for p in pids] if len(pids) == 2 else []
+
+    return proc, results, workers
+
+
+def _ended(pid: int) -> bool:
+    """Gone, or a zombie (its parent, the fork server, ended too, and a container's PID 1 may never reap it)."""
+    status = Path(f"/proc/{pid}/status")
+    return not status.exists() or "State:\tZ" in status.read_text()
+
+
+@pytest.mark.parametrize("group", [False, True])
+def test_sigterm_ends_the_masks_workers_with_the_stage(group, tiny_capture, tiny_decode, tmp_path):
+    """The masks stage's views run in worker processes (masks.workers): SIGTERM -- to the stage alone, or to its
+    whole process group as Slurm and Snakemake send it -- stops the stage at once (not after the queued views,
+    nor after the running ones: each holds for 10 minutes here), leaves no temporary folder and no worker behind."""
+    import time
+
+    proc, results, workers = _held_masks_workers(tiny_capture, tiny_decode, tmp_path, group)
+    output = _signal_when(proc, workers, "both workers inside a view", group=group)
     assert proc.returncode == 143, output[-3000:]
     _stopped_cleanly(output, results)
     assert not (results / "masks").exists()
     time.sleep(1)
-    for pid in map(int, marker.read_text().split()):
-        # ended: gone, or a zombie (its parent, the fork server, ended too, and a container's PID 1 may never reap)
-        status = Path(f"/proc/{pid}/status")
-        assert not status.exists() or "State:\tZ" in status.read_text(), f"worker {pid} still runs"
+    assert all(_ended(pid) for pid in workers())
+
+
+def test_the_masks_workers_end_themselves_when_the_stage_is_killed(tiny_capture, tiny_decode, tmp_path):
+    """SIGKILL gives the stage no chance to stop its workers: each notices within seconds that the stage is gone
+    and ends, instead of computing the views queued for it and then waiting forever."""
+    import time
+
+    proc, _, workers = _held_masks_workers(tiny_capture, tiny_decode, tmp_path)
+    _signal_when(proc, workers, "both workers inside a view", signum=9)
+    deadline = time.time() + 30
+    while not all(_ended(pid) for pid in workers()):
+        assert time.time() < deadline, "a worker outlived the killed stage by 30 s"
+        time.sleep(0.2)
 
 
 def _colmap_model(cameras_json: Path, folder: Path) -> Path:
