@@ -15,12 +15,15 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TypeVar
 
 import cv2
 from threadpoolctl import threadpool_limits
+
+from ..errors import OrcaError
 
 T = TypeVar("T")
 ORPHAN_CHECK_S = 1.0  # how often a worker looks whether the stage that started it still runs
@@ -98,7 +101,12 @@ def view_workers(workers: int) -> Iterator[MapViews]:
         futures = [pool.submit(fn, *task) for task in tasks]
         out = []
         for future in futures:
-            out.append(future.result())
+            try:
+                out.append(future.result())
+            except BrokenProcessPool as error:
+                raise OrcaError(f"a masks worker process ended abruptly ({error})", fix="it was most likely out of "
+                                "memory: run with fewer workers (--set masks.workers=1 uses none) or a smaller "
+                                "masks.work_size") from error
             done()
         return out
 

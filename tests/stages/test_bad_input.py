@@ -363,6 +363,33 @@ def test_the_masks_workers_end_themselves_when_the_stage_is_killed(tiny_capture,
         time.sleep(0.2)
 
 
+def test_a_masks_worker_that_dies_stops_the_stage_with_the_likely_cause(tiny_capture, tiny_decode, tmp_path):
+    """A worker killed mid-view (what the OOM killer does) ends the stage with a message that names the likely
+    cause and the fix, not a traceback of the process pool; the other worker ends with it, nothing half-written."""
+    import os
+    import signal
+    import time
+
+    proc, results, workers = _held_masks_workers(tiny_capture, tiny_decode, tmp_path)
+    try:
+        deadline = time.time() + 300
+        while not workers():
+            assert proc.poll() is None, proc.communicate()[0][-3000:]
+            assert time.time() < deadline, "the workers never held"
+            time.sleep(0.1)
+        os.kill(workers()[0], signal.SIGKILL)
+        output = proc.communicate(timeout=120)[0]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 2, output[-3000:]
+    assert "ended abruptly" in output and "masks.workers=1" in output, output[-3000:]
+    assert "Traceback" not in output, output[-3000:]
+    assert not list(results.rglob("*.partial")) and not (results / "masks").exists()
+    time.sleep(1)
+    assert all(_ended(pid) for pid in workers())
+
+
 def _colmap_model(cameras_json: Path, folder: Path) -> Path:
     """A COLMAP text model of these cameras and of 8 points around the object that every photo sees: what
     `orca train --points` reads (the poses stage's sparse/), without the time SfM takes."""
