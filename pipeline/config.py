@@ -145,6 +145,16 @@ class PosesConfig(StrictModel):
     sequential_overlap: int = Field(
         12, ge=1, description="'sequential': neighbours on each side, plus photos 2^k apart (loop closure)."
     )
+    relaxed_min_inliers: int = Field(
+        15, ge=0, description="photos still without a camera after mapping are registered again with the absolute "
+        "pose needing this many inlier 2D-3D matches (COLMAP's bar: 30): in a sparse walk-around a photo verified "
+        "with its neighbours may see too few of the model's 3D points for it (the blowtorch: 50 -> 55 of 67 photos, "
+        "the 5 new ones 0.5-2.5 degrees from the photographers' poses). The pose checks judge them like any other; "
+        "0: no second pass."
+    )
+    relaxed_min_inlier_ratio: float = Field(
+        0.1, gt=0, le=1, description="...and this share of its 2D-3D matches as inliers (COLMAP's bar: 0.25)."
+    )
     max_image_size: int = Field(
         1600, ge=0, description="SIFT runs on images downscaled to this longest side (0: full size)."
     )

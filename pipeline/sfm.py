@@ -307,6 +307,14 @@ def run_sfm(
                         "the photos overlap weakly, so check poses.png and poses_report.json's checks",
                         found[0].num_reg_images(), ranked[0].num_reg_images() if ranked else 0)
             ranked, mapper = found, "global"
+    if ranked and ranked[0].num_reg_images() < len(names) and config.relaxed_min_inliers:
+        more = continued(db_path, image_dir, work / "sparse_relaxed", ranked[0],
+                         relaxed_options(_mapper_options(config, groups, threads, len(names)), config))[0]
+        if more.num_reg_images() > ranked[0].num_reg_images():
+            log.info("%d more photo(s) registered with relaxed thresholds (%d inlier 2D-3D matches, %.0f %% of them)",
+                     more.num_reg_images() - ranked[0].num_reg_images(), config.relaxed_min_inliers,
+                     100 * config.relaxed_min_inlier_ratio)
+            ranked = [more, *ranked[1:]]
     seconds["mapping"] = time.time() - t
     if not ranked:
         raise _no_model_error(db_path, names, features, num_verified, folder)
@@ -415,6 +423,14 @@ def _mapper_options(config: PosesConfig, groups: Sequence[CameraGroup], threads:
         options.ba_refine_extra_params = False
         options.mapper.abs_pose_refine_focal_length = False
         options.mapper.abs_pose_refine_extra_params = False
+    return options
+
+
+def relaxed_options(options: Any, config: PosesConfig) -> Any:
+    """The mapper's ``options`` with the absolute pose's bars lowered to ``poses.relaxed_min_inliers`` and
+    ``relaxed_min_inlier_ratio``: the second pass for photos the first left without a camera."""
+    options.mapper.abs_pose_min_num_inliers = config.relaxed_min_inliers
+    options.mapper.abs_pose_min_inlier_ratio = config.relaxed_min_inlier_ratio
     return options
 
 

@@ -585,3 +585,41 @@ def test_cli_writes_results_next_to_decode(tiny_capture, tiny_decode, tmp_path, 
     assert main(["poses", "captures/tiny", "--set", "num_threads=1"]) == 0
     assert (tmp_path / "results" / "tiny" / "poses" / "cameras.json").is_file()
     assert main(["poses", "captures/tiny", "--set", "matcher=bogus"]) == 2
+
+
+@pytest.mark.slow
+def test_photos_left_without_a_camera_get_one_in_the_relaxed_pass(sfm_sphere_decode, tmp_path):
+    """The second pass (poses.relaxed_min_inliers) continues a model with the absolute pose's bars lowered: photos
+    taken out of a full model of the sphere capture come back where they were; with a bar no photo reaches,
+    none does (the bar is what the pass sets)."""
+    from pipeline.sfm import _mapper_options, continued, largest_first, relaxed_options
+    from pipeline.signals import import_pycolmap
+
+    pycolmap = import_pycolmap()
+    images, db = sfm_sphere_decode / "srgb", tmp_path / "database.db"
+    pycolmap.extract_features(db, images, camera_mode=pycolmap.CameraMode.SINGLE)
+    pycolmap.match_exhaustive(db)
+    config = PosesConfig(num_threads=2)
+    (tmp_path / "full").mkdir()
+    full = largest_first(pycolmap.incremental_mapping(db, images, tmp_path / "full",
+                                                      _mapper_options(config, [], 2, 20)))[0]
+    assert full.num_reg_images() == 20
+
+    def rotations(rec) -> dict[str, np.ndarray]:
+        return {im.name: im.cam_from_world().rotation.matrix() for im in rec.images.values() if im.has_pose}
+
+    truth = rotations(full)
+    out = sorted(truth)[1::4]
+    for im in full.images.values():
+        if im.name in out:
+            full.deregister_frame(im.frame_id)
+    assert full.num_reg_images() == 20 - len(out)
+    for bar, back in ((config.relaxed_min_inliers, True), (10**6, False)):
+        options = relaxed_options(_mapper_options(config, [], 2, 20), config.model_copy(
+            update={"relaxed_min_inliers": bar}))
+        rec = continued(db, images, tmp_path / f"relaxed_{bar}", full, options)[0]
+        found = rotations(rec)
+        assert all((name in found) == back for name in out), sorted(found)
+        for name in out if back else []:  # the continued model keeps the full one's frame
+            cos = (np.trace(found[name].T @ truth[name]) - 1) / 2
+            assert np.degrees(np.arccos(np.clip(cos, -1, 1))) < 0.5, name
