@@ -307,7 +307,8 @@ def run_sfm(
                         "the photos overlap weakly, so check poses.png and poses_report.json's checks",
                         found[0].num_reg_images(), ranked[0].num_reg_images() if ranked else 0)
             ranked, mapper = found, "global"
-    if ranked and ranked[0].num_reg_images() < len(names) and config.relaxed_min_inliers:
+    # not in a retry: that one is for photos placed where others look the same, and wants stricter bars, not laxer
+    if ranked and ranked[0].num_reg_images() < len(names) and config.relaxed_min_inliers and retry is None:
         more = continued(db_path, image_dir, work / "sparse_relaxed", ranked[0],
                          relaxed_options(_mapper_options(config, groups, threads, len(names)), config))[0]
         if more.num_reg_images() > ranked[0].num_reg_images():
