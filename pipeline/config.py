@@ -1087,6 +1087,11 @@ def stage_config(
     )
 
 
+# Keys that change how a stage runs, never what it makes: out of its digest, so a machine with other cores
+# does not rerun it.
+HOW_NOT_WHAT = {"masks": {"workers"}}
+
+
 def stage_config_digest(
     section: str,
     preset: str | None = None,
@@ -1100,5 +1105,5 @@ def stage_config_digest(
     changed by an upgrade of this package, a preset edited).
     """
     values = getattr(stage_config(section, preset, None, overrides, capture_yaml), section)
-    text = json.dumps(values.model_dump(mode="json"), sort_keys=True)
+    text = json.dumps(values.model_dump(mode="json", exclude=HOW_NOT_WHAT.get(section, set())), sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]

@@ -65,6 +65,9 @@ def test_a_stages_config_digest_follows_its_own_values_only(tmp_path, monkeypatc
     ), "a bare key is the stage's own, as on its CLI"
     assert stage_config_digest("train", "fast", ["mesh.resolution=64"]) == base, "another stage's value"
     assert stage_config_digest("train", "standard") != base
+    masks = stage_config_digest("masks", "fast")
+    assert stage_config_digest("masks", "fast", ["workers=3"]) == masks, "how it runs, not what it makes"
+    assert stage_config_digest("masks", "fast", ["rounds=2"]) != masks
     capture_yaml = tmp_path / "capture.yaml"
     assert stage_config_digest("train", "fast", capture_yaml=capture_yaml) == base, "no capture.yaml: defaults"
     capture_yaml.write_text("train:\n  render:\n    ior: 1.9\n")
