@@ -33,7 +33,9 @@ class View:
     @cached_property
     def rgba(self) -> np.ndarray:
         """``(H, W, 4)`` uint8: :attr:`image` with an opaque alpha. OpenCV warps four channels several times faster
-        than three (its vectorized path), and the photo-consistency sweeps warp neighbours thousands of times."""
+        than three (its vectorized path), and the photo-consistency sweeps warp neighbours thousands of times.
+        Made once, on first use: make a new view (``dataclasses.replace``) rather than edit the image of one that
+        a sweep has read."""
         return cv2.cvtColor(self.image, cv2.COLOR_RGB2RGBA)
 
 
