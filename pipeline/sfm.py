@@ -79,6 +79,7 @@ class SfmResult:
     seconds: dict[str, float] = field(default_factory=dict)
     mapper: str = "incremental"  # which mapper made the model: "incremental" or "global"
     unregistered: dict[str, str] = field(default_factory=dict)  # image stem -> why it has no camera
+    relaxed: list[str] | None = None  # image stems the relaxed second pass registered (None: it did not run)
 
 
 def colmap_name(name: str) -> str:
@@ -308,23 +309,25 @@ def run_sfm(
                         found[0].num_reg_images(), ranked[0].num_reg_images() if ranked else 0)
             ranked, mapper = found, "global"
     # not in a retry: that one is for photos placed where others look the same, and wants stricter bars, not laxer
+    relaxed = None
     if ranked and ranked[0].num_reg_images() < len(names) and config.relaxed_min_inliers and retry is None:
         more = continued(db_path, image_dir, work / "sparse_relaxed", ranked[0],
                          relaxed_options(_mapper_options(config, groups, threads, len(names)), config))[0]
-        if more.num_reg_images() > ranked[0].num_reg_images():
-            log.info("%d more photo(s) registered with relaxed thresholds (%d inlier 2D-3D matches, %.0f %% of them)",
-                     more.num_reg_images() - ranked[0].num_reg_images(), config.relaxed_min_inliers,
-                     100 * config.relaxed_min_inlier_ratio)
+        relaxed = sorted(registered_stems(more) - registered_stems(ranked[0]))
+        if relaxed:
+            log.info("%d more photo(s) registered with relaxed thresholds (%d inlier 2D-3D matches, %.0f %% of "
+                     "them): %s", len(relaxed), config.relaxed_min_inliers, 100 * config.relaxed_min_inlier_ratio,
+                     ", ".join(relaxed))
             ranked = [more, *ranked[1:]]
     seconds["mapping"] = time.time() - t
     if not ranked:
         raise _no_model_error(db_path, names, features, num_verified, folder)
     best = ranked[0]
-    others = [sorted(stem_of(im.name) for im in r.images.values() if im.has_pose) for r in ranked[1:]]
-    registered = {stem_of(im.name) for im in best.images.values() if im.has_pose}
+    others = [sorted(registered_stems(r)) for r in ranked[1:]]
+    registered = registered_stems(best)
     why = unregistered_reasons(db_path, names, registered, others, verification_options(config, retry).min_num_inliers)
     result = SfmResult(best, [r.num_reg_images() for r in ranked], others, features, matcher, num_pairs,
-                       num_verified, seconds, mapper, why)
+                       num_verified, seconds, mapper, why, relaxed)
     _check_registered(result, names, config, folder)
     return result
 
@@ -425,6 +428,11 @@ def _mapper_options(config: PosesConfig, groups: Sequence[CameraGroup], threads:
         options.mapper.abs_pose_refine_focal_length = False
         options.mapper.abs_pose_refine_extra_params = False
     return options
+
+
+def registered_stems(rec: pycolmap.Reconstruction) -> set[str]:
+    """The image stems of a model's photos that have a camera."""
+    return {stem_of(im.name) for im in rec.images.values() if im.has_pose}
 
 
 def relaxed_options(options: Any, config: PosesConfig) -> Any:
@@ -752,6 +760,12 @@ def posed_from_sfm(decoded: DecodeArtifacts, names: list[str], calibration: tupl
                           for g in groups],
         "seconds": {k: round(v, 2) for k, v in sfm.seconds.items()},
         "not_registered_why": sfm.unregistered,
+        "relaxed_pass": None if sfm.relaxed is None else {
+            "what": "photos without a camera after mapping, registered with the absolute pose needing "
+            "poses.relaxed_min_inliers inlier 2D-3D matches and relaxed_min_inlier_ratio of them (COLMAP's bars: 30, "
+            "0.25); the pose checks judged them like any other",
+            "min_inliers": config.relaxed_min_inliers, "min_inlier_ratio": config.relaxed_min_inlier_ratio,
+            "photos": sfm.relaxed},
     }
     return posed_from_reconstruction(rec, names, stats), rec
 

@@ -571,6 +571,8 @@ def test_photos_that_do_not_register_are_named_with_the_reason(sfm_sphere_decode
     assert sorted(report["not_registered_why"]) == noise
     assert all(r.startswith("no photo shares a verified geometry") for r in report["not_registered_why"].values())
     assert any("did not register" in w for w in report["warnings"])
+    # the relaxed second pass ran for them and placed none: noise matches nothing at any bar
+    assert report["relaxed_pass"]["photos"] == [] and report["relaxed_pass"]["min_inliers"] == 15
 
 
 def test_cli_writes_results_next_to_decode(tiny_capture, tiny_decode, tmp_path, monkeypatch):
