@@ -144,6 +144,17 @@ def view_evidence(view: View, near: Sequence[View] | None, nbrs: Sequence[View],
     return occluded, floor, not_floor
 
 
+def view_masks(run_views: MapViews, fn: Callable[..., np.ndarray], tasks: Sequence[tuple[Any, ...]],
+               fixed: dict[int, np.ndarray], step: Callable[[str], None]) -> list[np.ndarray]:
+    """Every view's ``(H, W)`` bool mask: the user's where ``fixed``, else ``fn(*task)`` by ``run_views`` with the
+    next of ``tasks`` (one per view not fixed, in order); a "segment" step per view."""
+    made = iter(run_views(fn, tasks, lambda: step("segment")))
+    masks = [fixed[i] if i in fixed else next(made) for i in range(len(tasks) + len(fixed))]
+    for _ in fixed:
+        step("segment")
+    return masks
+
+
 @dataclass
 class Evidence:
     """What :func:`gather_evidence` found before any hull (per view, at the working size)."""
@@ -204,12 +215,9 @@ def gather_evidence(views: Sequence[View], opts: SegmentOptions, fixed: dict[int
     backgrounds = [o if swept is None else o | swept for o, swept in zip(outsides, occluded)]
 
     certain = [b if f is None else b | f for b, f in zip(backgrounds, floors)]
-    first = iter(run_views(grabcut, [(v.image, first_seeds(spheres[i], certain[i], opts.seed_radius, above[i],
-                                                           objects[i]), opts.grabcut_iterations)
-                                     for i, v in enumerate(views) if i not in fixed], lambda: step("segment")))
-    masks = [fixed[i] if i in fixed else next(first) for i in range(len(views))]
-    for _ in fixed:
-        step("segment")
+    masks = view_masks(run_views, grabcut, [(v.image, first_seeds(spheres[i], certain[i], opts.seed_radius, above[i],
+                                                                   objects[i]), opts.grabcut_iterations)
+                                            for i, v in enumerate(views) if i not in fixed], fixed, step)
     counts = None if labels is None else {name: int((labels == value).sum()) for name, value in LABELS.items()}
     return Evidence(plane, spheres, floors, above, backgrounds, occluded, masks, objects, counts)
 
@@ -394,12 +402,9 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
         # views). The last round forces the whole core again: a glossy rim that mirrors the room is lost by colour
         # only in the few views that see it at the outline, so the hull kept it, and these masks keep it too.
         core = opts.core_fraction if r < opts.rounds - 1 else opts.final_core_fraction
-        made = iter(run_views(round_mask, [(v.image, hulls[i], _released(occluded[i], fronts[i], through[i], opts),
-                                            backgrounds[i], floors[i], v.clipped, evidence.objects[i], core, opts)
-                                           for i, v in enumerate(views) if i not in fixed], lambda: step("segment")))
-        new = [fixed[i] if i in fixed else next(made) for i in range(n)]
-        for _ in fixed:
-            step("segment")
+        tasks = [(v.image, hulls[i], _released(occluded[i], fronts[i], through[i], opts), backgrounds[i], floors[i],
+                  v.clipped, evidence.objects[i], core, opts) for i, v in enumerate(views) if i not in fixed]
+        new = view_masks(run_views, round_mask, tasks, fixed, step)
         agreement = [iou(a, b) for a, b in zip(new, hulls)]
         change = [iou(a, b) for a, b in zip(new, masks)]
         rounds.append({"agreement_median": float(np.median(agreement)), "agreement_min": float(np.min(agreement)),
