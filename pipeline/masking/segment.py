@@ -249,8 +249,12 @@ def refine_checked(views: Sequence[View], opts: SegmentOptions, evidence: Eviden
     view, unexplained pixels touching them (:func:`unexplained_beside`) of more than ``unexplained_retry_share``
     of their area, the rounds run again with ``unexplained_vote`` 0. The hull agrees with masks that are all wrong
     the same way (a vase's mirror-like neck, or paint coloured like the posters around it, given to the room in
-    every view), but no background surface explains what they left out. The check needs the support plane's
-    evidence and a capture whose background is mostly explained (``unexplained_max_rate``)."""
+    every view), but no background surface explains what they left out. The second masks are kept only if they
+    explain it: at most ``unexplained_retry_share`` left beside them. Otherwise the unexplained pixels were not a
+    part lost alike but something wider the support plane does not explain (a table top when the plane found is
+    the floor under it), and counting them as the object's only grows the masks into it: the first masks stay.
+    The check needs the support plane's evidence and a capture whose background is mostly explained
+    (``unexplained_max_rate``)."""
     fixed = fixed or {}
     seg = refine(views, opts, evidence, fixed, step, run_views)
     if opts.unexplained_vote < 1.0 or opts.unexplained_retry_share <= 0:
@@ -275,11 +279,20 @@ def refine_checked(views: Sequence[View], opts: SegmentOptions, evidence: Eviden
     on_retry()
     again = refine(views, replace(opts, unexplained_vote=0.0), evidence, fixed, step, run_views)
     after = median_share(again.masks)
-    again.unexplained_beside = {"median": before, "threshold": opts.unexplained_retry_share, "retried": True,
-                                "median_after": after}
-    log.info("segmented again: unexplained pixels beside the masks %.0f %% of their area (median view)",
-             100 * (after or 0.0))
-    return again
+    kept = after is not None and after <= opts.unexplained_retry_share
+    check = {"median": before, "threshold": opts.unexplained_retry_share, "retried": True, "median_after": after,
+             "kept": "second" if kept else "first"}
+    if kept:
+        log.info("segmented again: unexplained pixels beside the masks %.0f %% of their area (median view)",
+                 100 * after)
+        again.unexplained_beside = check
+        return again
+    log.warning("segmented again, the masks still leave out unexplained pixels beside them of %s of their area "
+                "(median view): not a part lost alike in every view but something wider that no background "
+                "explains (a table, a floor the support plane is not); the first masks are kept",
+                "?" if after is None else f"{100 * after:.0f} %")
+    seg.unexplained_beside = check
+    return seg
 
 
 def probe_masks(tracks: Tracks | None, fixed: dict[int, np.ndarray] | None = None, run_views: MapViews = serial

@@ -222,13 +222,22 @@ def run_masks(
             final, plane, rounds, labelled = seg.masks, seg.plane, seg.rounds, seg.track_labels
             beside = seg.unexplained_beside
         if beside is not None and beside["retried"]:
-            warnings.append(
-                f"the first masks left out, beside them, pixels no background explains ({100 * beside['median']:.0f} % "
-                "of a mask's area, median view): a part lost alike in every view (mirror-like, or coloured like the "
-                "room). The masks were made again counting those pixels as the object's "
-                f"({100 * (beside['median_after'] or 0.0):.0f} % left beside them); check contact_sheet.jpg: a table "
-                "or a prop next to the object may now be in them (masks.unexplained_retry_share=0 turns this off), or "
-                "give masks for a few views in CAPTURE/masks/")
+            lost = (f"the first masks left out, beside them, pixels no background explains "
+                    f"({100 * beside['median']:.0f} % of a mask's area, median view)")
+            after = "?" if beside["median_after"] is None else f"{100 * beside['median_after']:.0f} %"
+            if beside["kept"] == "second":
+                warnings.append(
+                    f"{lost}: a part lost alike in every view (mirror-like, or coloured like the room). The masks were "
+                    f"made again counting those pixels as the object's ({after} left beside them); check "
+                    "contact_sheet.jpg: a table or a prop next to the object may now be in them "
+                    "(masks.unexplained_retry_share=0 turns this off), or give masks for a few views in CAPTURE/masks/")
+            else:
+                warnings.append(
+                    f"{lost}. Made again counting them as the object's, the masks still left {after} beside them: "
+                    "not a part of the object lost alike in every view but something wider that no background "
+                    "explains (a table under the object, when the support plane found is the floor), so the first "
+                    "masks are kept; check contact_sheet.jpg for a mirror-like part missing, and give masks for a "
+                    "few views in CAPTURE/masks/ if one is")
 
         # The hull of the final masks: the views' agreement and the object's bounding sphere.
         points, index = hull_grid(opts.hull_resolution, plane)
@@ -315,8 +324,9 @@ def run_masks(
         report["unexplained_beside"] = None if beside is None else {
             "what": "pixels outside the masks, touching them, that no background explains (the support plane "
             "clearly does not, no surface outside the sphere does), as a share of the mask's area, median view: "
-            "above the threshold the masks lost a part alike in every view and were made again with those "
-            "pixels' background votes not counted (pipeline.masking.segment.refine_checked)", **beside}
+            "above the threshold the masks were made again with those pixels' background votes not counted, "
+            "and the second masks kept (kept: second) only where they leave at most the threshold beside them "
+            "(pipeline.masking.segment.refine_checked)", **beside}
         write_json(tmp / MASKS_REPORT, report)
         inputs: dict[str, Path] = {CAMERAS_JSON: poses_dir / CAMERAS_JSON, DECODE_JSON: decoded.folder / DECODE_JSON}
         inputs.update({f"user_mask:{n}": p for n, p in user_files.items()})
