@@ -72,7 +72,8 @@ def first_seeds(sphere: np.ndarray, background: np.ndarray, seed_radius: float,
 
 def hull_seeds(hull: np.ndarray, keep_out: np.ndarray | None, background: np.ndarray, floor: np.ndarray | None,
                erode_px: int, band_px: int, clipped: np.ndarray | None = None,
-               known_object: np.ndarray | None = None, core_fraction: float = 0.0) -> np.ndarray:
+               known_object: np.ndarray | None = None, core_fraction: float = 0.0,
+               core_hull: np.ndarray | None = None) -> np.ndarray:
     """GrabCut labels from the hull's reprojection: certain object in the hull's core -- eroded by ``erode_px``
     and farther from the outline than ``core_fraction`` of its deepest pixel's distance (but not in
     ``keep_out``, where the hull is known to be wrong) and on clipped highlights inside the hull (a glossy
@@ -80,11 +81,14 @@ def hull_seeds(hull: np.ndarray, keep_out: np.ndarray | None, background: np.nda
     background in a band around it, certain background beyond and in ``background`` and wherever the floor was
     seen -- except the floor inside the hull, which is only probable background: the bottom rim of a glossy object
     mirrors the floor next to it at grazing angles and passes the floor test. ``known_object`` (sparse points on the
-    object) is certain object wherever it is not certain background."""
+    object) is certain object wherever it is not certain background. ``core_hull`` (a tighter hull's reprojection):
+    the core is its, the rest of ``hull`` probable object."""
     h8 = hull.astype(np.uint8)
     seeds = np.full(hull.shape, cv2.GC_BGD, np.uint8)
     seeds[cv2.dilate(h8, disc(band_px)) > 0] = cv2.GC_PR_BGD
     seeds[hull] = cv2.GC_PR_FGD
+    if core_hull is not None:
+        h8 = (core_hull & hull).astype(np.uint8)
     core = cv2.erode(h8, disc(erode_px)) > 0
     if core_fraction > 0:
         # A hull fattened by loose first masks (a wedge of carpet beside the object) is certain object only in

@@ -15,7 +15,7 @@ from ..metrics import iou
 from ..object_frame import camera_up
 from .colour import release_room_colours
 from .grabcut import first_seeds, grabcut, hull_seeds
-from .hull import OUTSIDE_VOTES, carve, carve_votes, hull_depth, hull_grid
+from .hull import OUTSIDE_VOTES, carve, carve_votes, hull_depth, hull_grid, reproject
 from .parallel import MapViews, serial
 from .support_plane import find_support_plane, floor_evidence
 from .sweeps import floor_through_hull, front_evidence, occluded_region, occluder_evidence
@@ -360,12 +360,13 @@ def hull_evidence(view: View, volume: np.ndarray, max_votes: float, near: Sequen
 
 def round_mask(image: np.ndarray, hull: np.ndarray, released: np.ndarray | None, background: np.ndarray,
                floor: np.ndarray | None, clipped: np.ndarray | None, objects: np.ndarray | None, core_fraction: float,
-               opts: SegmentOptions) -> np.ndarray:
+               opts: SegmentOptions, core_hull: np.ndarray | None = None) -> np.ndarray:
     """One view's GrabCut mask ``(H, W)`` bool in a round: seeded by the hull's reprojection ``hull``
-    (:func:`.grabcut.hull_seeds`: its core forced as object but where ``released``), the forced core's pixels
-    coloured like the room beside the object released (:func:`.colour.release_room_colours`)."""
+    (:func:`.grabcut.hull_seeds`: its core -- or ``core_hull``'s, a tighter hull's reprojection -- forced as object
+    but where ``released``), the forced core's pixels coloured like the room beside the object released
+    (:func:`.colour.release_room_colours`)."""
     seeds = hull_seeds(hull, released, background, floor, opts.core_erode_px, opts.band_px, clipped, objects,
-                       core_fraction)
+                       core_fraction, core_hull)
     if opts.core_colour_log_odds is not None:
         seeds = release_room_colours(image, seeds, opts.core_fraction, opts.colour_ring_px, opts.colour_bins,
                                      opts.core_colour_log_odds, opts.colour_min_pixels, opts.colour_open_px)
@@ -413,10 +414,17 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
         # Before the last round only the hull's deep core is certain object: colour trims the wedges of room that
         # loose first masks leave in the hull, and the next carve removes them (they are off the object in many
         # views). The last round forces the whole core again: a glossy rim that mirrors the room is lost by colour
-        # only in the few views that see it at the outline, so the hull kept it, and these masks keep it too.
+        # only in the few views that see it at the outline, so the hull kept it, and these masks keep it too. The
+        # core is cut from a tighter hull (core_carve_share): a wedge that fewer views than carve_share see past,
+        # but a good many do, is left to colour rather than forced in every round.
         core = opts.core_fraction if r < opts.rounds - 1 else opts.final_core_fraction
+        tight: list[np.ndarray | None] = [None] * n
+        if opts.core_carve_share is not None:
+            core_votes = max(opts.core_carve_votes, round(opts.core_carve_share * n))
+            if core_votes < votes:  # else the tighter hull is the hull
+                tight = run_views(reproject, [(volume, v, core_votes - 0.5) for v in views], lambda: None)
         tasks = [(v.image, hulls[i], _released(occluded[i], fronts[i], through[i], opts), backgrounds[i], floors[i],
-                  v.clipped, evidence.objects[i], core, opts) for i, v in enumerate(views) if i not in fixed]
+                  v.clipped, evidence.objects[i], core, opts, tight[i]) for i, v in enumerate(views) if i not in fixed]
         new = view_masks(run_views, round_mask, tasks, fixed, step)
         agreement = [iou(a, b) for a, b in zip(new, hulls)]
         change = [iou(a, b) for a, b in zip(new, masks)]

@@ -646,6 +646,43 @@ def test_grabcut_trims_a_hull_too_large_by_a_ring_of_carpet_only_when_its_core_i
     assert iou(masks[0.2], obj) > 0.9
 
 
+def test_a_wedge_few_views_see_past_is_in_the_hull_but_not_in_the_core_that_grabcut_must_keep():
+    """A ball (radius 0.4) and a box beside it that loose masks keep in every view but the 7 of 40 that look
+    across it (a wedge few views see past): 7 background votes do not cut it from the hull (20 %: 8 votes), but
+    they cut it from the tighter hull the core comes from (15 %: 6 votes). So the wedge is probable object, for
+    colour to decide, and GrabCut gives it back to the carpet; forced with the hull's own core it stays."""
+    views = ring_views(20, size=(160, 120)) + ring_views(20, size=(160, 120), elevation_deg=50.0)
+    wedge_lo, wedge_hi = np.array([0.45, -0.15, -0.3]), np.array([0.75, 0.15, 0.0])
+    SEE_PAST = {4, 5, 6, 14, 15, 16, 25}  # noqa: N806 -- the views looking across the wedge, beside the ball
+    rng = np.random.default_rng(0)
+    masks, balls, wedges = [], [], []
+    for i, v in enumerate(views):
+        v.K = np.array([[150.0, 0, 80], [0, 150.0, 60], [0, 0, 1]])
+        ball = sphere_distance(v, radius=0.4) < 1.0
+        wedge = np.isfinite(box_hit(v, wedge_lo, wedge_hi)[0]) & ~ball
+        image = np.clip(rng.normal((150, 40, 60), 18, (120, 160, 3)), 0, 255)
+        image[ball] = np.clip(rng.normal((170, 130, 60), 12, (ball.sum(), 3)), 0, 255)
+        v.image[:] = image.astype(np.uint8)
+        masks.append(ball if i in SEE_PAST else ball | wedge)
+        balls.append(ball)
+        wedges.append(wedge)
+    points, index = hull_grid(64, None)
+    volume = carve(masks, views, points, index, 64)
+    opts = SegmentOptions()
+    votes = max(opts.carve_votes, round(opts.carve_share * len(views)))
+    core_votes = max(opts.core_carve_votes, round(opts.core_carve_share * len(views)))
+    assert core_votes < 7 < votes
+    for i in (1, 18, 22):
+        v, ball, wedge = views[i], balls[i], wedges[i]
+        assert wedge.sum() > 100
+        hull, tight = reproject(volume, v, votes - 0.5), reproject(volume, v, core_votes - 0.5)
+        assert (hull & wedge).sum() > 0.8 * wedge.sum() and (tight & wedge).sum() < 0.2 * wedge.sum()
+        loose = hull_seeds(hull, None, np.zeros_like(ball), None, 3, 4)
+        seeds = hull_seeds(hull, None, np.zeros_like(ball), None, 3, 4, core_hull=tight)
+        assert (loose[wedge] == cv2.GC_FGD).mean() > 0.25 and (seeds[wedge] == cv2.GC_FGD).mean() < 0.05
+        assert iou(grabcut(v.image, loose, 4), ball) < 0.9 < iou(grabcut(v.image, seeds, 4), ball)
+
+
 def test_colour_log_odds_favour_the_region_a_colour_is_frequent_in():
     """Background all red, object all brass: a red pixel's odds are the two regions' red counts (plus one each)
     over their totals (plus one per bin), a brass pixel's the reverse, and a colour in neither is as likely in
