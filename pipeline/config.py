@@ -278,14 +278,14 @@ class MasksConfig(StrictModel):
         0.15, ge=0, le=1, description="GrabCut's certain object (the hull's core) is cut from a tighter hull, where "
         "this share of the views is enough to cut a voxel; what the hull keeps beyond it is "
         "probable object, for colour to decide. A wedge of floor or wall that only a few views see past (between a "
-        "handle and a tank) is then not forced as object (the blowtorch 0.897/0.818 -> 0.935/0.853, median/worst "
+        "handle and a tank) is then not forced as object (the blowtorch 0.902/0.839 -> 0.935/0.853, median/worst "
         "view), but a glossy rim that colour loses in the views that see it edge-on is forced less often (the "
         "synthetic family's worst views -0.02..+0.00, docs/masks.md). None: the hull's own core"
     )
     core_carve_votes: int = Field(
-        5, ge=1, description="...and at least this many views: a glossy rim is lost by colour in the handful of "
-        "views that see it edge-on, and those must not cut it from the core (a 20-view capture's core is then its "
-        "hull's)"
+        6, ge=1, description="...and at least this many views: a glossy rim is lost by colour in the handful of "
+        "views that see it edge-on, and those must not cut it from the core (a capture of up to 32 views keeps its "
+        "hull's core)"
     )
     core_fraction: float = Field(
         0.4, ge=0, lt=1, description="in every round but the last, GrabCut takes as certain object only the part of "

@@ -74,7 +74,7 @@ class SegmentOptions:
     carve_votes: float = 3.0
     carve_share: float = 0.2
     core_carve_share: float | None = 0.15
-    core_carve_votes: int = 5
+    core_carve_votes: int = 6
     core_erode_px: int = 3
     core_fraction: float = 0.4
     final_core_fraction: float = 0.0
