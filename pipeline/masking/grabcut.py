@@ -82,7 +82,7 @@ def hull_seeds(hull: np.ndarray, keep_out: np.ndarray | None, background: np.nda
     seen -- except the floor inside the hull, which is only probable background: the bottom rim of a glossy object
     mirrors the floor next to it at grazing angles and passes the floor test. ``known_object`` (sparse points on the
     object) is certain object wherever it is not certain background. ``core_hull`` (a tighter hull's reprojection):
-    the core is its, the rest of ``hull`` probable object."""
+    the core is eroded from it instead, and the rest of ``hull`` is probable object."""
     h8 = hull.astype(np.uint8)
     seeds = np.full(hull.shape, cv2.GC_BGD, np.uint8)
     seeds[cv2.dilate(h8, disc(band_px)) > 0] = cv2.GC_PR_BGD

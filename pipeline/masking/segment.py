@@ -289,7 +289,8 @@ def refine_checked(views: Sequence[View], opts: SegmentOptions, evidence: Eviden
         return again
     log.warning("segmented again, the masks still leave out unexplained pixels beside them of %s of their area "
                 "(median view): not a part lost alike in every view but something wider that no background "
-                "explains (a table, a floor the support plane is not); the first masks are kept",
+                "explains (a table under the object when the support plane found is the floor); the first masks "
+                "are kept",
                 "?" if after is None else f"{100 * after:.0f} %")
     seg.unexplained_beside = check
     return seg
