@@ -70,6 +70,15 @@ def carve_votes(opts: SegmentOptions, views: int) -> float:
     return max(opts.carve_votes, round(opts.carve_share * views))
 
 
+def core_carve_votes(opts: SegmentOptions, views: int) -> float | None:
+    """Background votes that cut a voxel from the tighter hull GrabCut's core comes from: ``core_carve_share`` of
+    the views, at least ``core_carve_votes``; None where that hull is the hull itself (no fewer votes) or off."""
+    if opts.core_carve_share is None:
+        return None
+    votes = max(opts.core_carve_votes, round(opts.core_carve_share * views))
+    return votes if votes < carve_votes(opts, views) else None
+
+
 def in_hull(volume: np.ndarray, points: np.ndarray, max_votes: float) -> np.ndarray:
     """``(M,)`` bool: which of ``points`` ``(M, 3)`` lie in the hull ``volume < max_votes`` (``volume``: votes over
     the grid on [-1, 1]^3, interpolated trilinearly, so the outline is finer than the voxels)."""

@@ -15,7 +15,7 @@ from ..metrics import iou
 from ..object_frame import camera_up
 from .colour import release_room_colours
 from .grabcut import first_seeds, grabcut, hull_seeds
-from .hull import OUTSIDE_VOTES, carve, carve_votes, hull_depth, hull_grid, reproject
+from .hull import OUTSIDE_VOTES, carve, carve_votes, core_carve_votes, hull_depth, hull_grid, reproject
 from .parallel import MapViews, serial
 from .support_plane import find_support_plane, floor_evidence
 from .sweeps import floor_through_hull, front_evidence, occluded_region, occluder_evidence
@@ -345,18 +345,21 @@ def final_mask(colour: np.ndarray, hull: np.ndarray, background: np.ndarray, occ
 
 
 def hull_evidence(view: View, volume: np.ndarray, max_votes: float, near: Sequence[View], around: Sequence[View],
-                  plane: Plane | None, opts: SegmentOptions) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
-    """One view's ``(depth, front, through)``: where its rays enter the hull ``volume < max_votes``
+                  plane: Plane | None, opts: SegmentOptions, core_votes: float | None = None
+                  ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, np.ndarray | None]:
+    """One view's ``(depth, front, through, core)``: where its rays enter the hull ``volume < max_votes``
     (:func:`.hull.hull_depth`), and, given the support ``plane``, a prop in front of the hull
     (:func:`.sweeps.front_evidence` against ``near``) and the floor seen through it
-    (:func:`.sweeps.floor_through_hull` against ``around``), each None when not looked for."""
+    (:func:`.sweeps.floor_through_hull` against ``around``), and the tighter hull ``volume < core_votes``
+    reprojected (:func:`.hull.reproject`), each None when not looked for."""
+    core = reproject(volume, view, core_votes) if core_votes is not None else None
     depth = hull_depth(volume, view, max_votes)
     front = through = None
     if plane is not None and opts.front_sweep:
         front = front_evidence(view, near, plane, depth, volume, max_votes, opts)
     if plane is not None and opts.through_floor:
         through = floor_through_hull(view, around, plane, np.isfinite(depth), opts)
-    return depth, front, through
+    return depth, front, through, core
 
 
 def round_mask(image: np.ndarray, hull: np.ndarray, released: np.ndarray | None, background: np.ndarray,
@@ -396,14 +399,18 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
         weights = vote_weights(views, backgrounds, floors, fixed, opts, unexplained)
         volume = carve(masks, views, points, index, opts.hull_resolution, weights, run_views)
         votes = carve_votes(opts, n)
+        core_votes = core_carve_votes(opts, n)
+        core_max = None if core_votes is None else core_votes - 0.5
         step("carve")
         # Props in front of the object inside the sphere are found anew against each round's hull, from the second
         # (the sphere prior's masks make a hull too loose to have much in front of it).
         found = run_views(hull_evidence, [(v, volume, votes - 0.5, [views[j] for j in near[i]],
                                            [views[j] for j in around[i]], plane if r > 0 and i not in fixed else None,
-                                           opts) for i, v in enumerate(views)],
+                                           opts, core_max if i not in fixed else None)
+                                          for i, v in enumerate(views)],
                           (lambda: step("evidence against the hull")) if r > 0 else (lambda: None))
         hulls = [np.isfinite(f[0]) for f in found]
+        cores = [f[3] for f in found]
         if r > 0:
             fronts = [f[1] for f in found]
             through = [f[2] for f in found]
@@ -419,13 +426,8 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
         # core is cut from a tighter hull (core_carve_share): a wedge that fewer views than carve_share see past,
         # but a good many do, is left to colour rather than forced in every round.
         core = opts.core_fraction if r < opts.rounds - 1 else opts.final_core_fraction
-        tight: list[np.ndarray | None] = [None] * n
-        if opts.core_carve_share is not None:
-            core_votes = max(opts.core_carve_votes, round(opts.core_carve_share * n))
-            if core_votes < votes:  # else the tighter hull is the hull
-                tight = run_views(reproject, [(volume, v, core_votes - 0.5) for v in views], lambda: None)
         tasks = [(v.image, hulls[i], _released(occluded[i], fronts[i], through[i], opts), backgrounds[i], floors[i],
-                  v.clipped, evidence.objects[i], core, opts, tight[i]) for i, v in enumerate(views) if i not in fixed]
+                  v.clipped, evidence.objects[i], core, opts, cores[i]) for i, v in enumerate(views) if i not in fixed]
         new = view_masks(run_views, round_mask, tasks, fixed, step)
         agreement = [iou(a, b) for a, b in zip(new, hulls)]
         change = [iou(a, b) for a, b in zip(new, masks)]

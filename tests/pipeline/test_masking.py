@@ -13,7 +13,7 @@ import pytest
 from pipeline.cameras import look_at
 from pipeline.masking.colour import colour_log_odds, release_room_colours
 from pipeline.masking.grabcut import grabcut, hull_seeds
-from pipeline.masking.hull import carve, hull_depth, hull_grid, in_hull, reproject
+from pipeline.masking.hull import carve, carve_votes, core_carve_votes, hull_depth, hull_grid, in_hull, reproject
 from pipeline.masking.parallel import view_workers
 from pipeline.masking.prior import PriorSphere, find_prior_sphere, in_sphere_frame, outgrown
 from pipeline.masking.segment import (
@@ -669,9 +669,9 @@ def test_a_wedge_few_views_see_past_is_in_the_hull_but_not_in_the_core_that_grab
     points, index = hull_grid(64, None)
     volume = carve(masks, views, points, index, 64)
     opts = SegmentOptions()
-    votes = max(opts.carve_votes, round(opts.carve_share * len(views)))
-    core_votes = max(opts.core_carve_votes, round(opts.core_carve_share * len(views)))
+    votes, core_votes = carve_votes(opts, len(views)), core_carve_votes(opts, len(views))
     assert core_votes < 7 < votes
+    assert core_carve_votes(opts, 32) is None  # the demo's 32 views: the core is the hull's
     for i in (1, 18, 22):
         v, ball, wedge = views[i], balls[i], wedges[i]
         assert wedge.sum() > 100
