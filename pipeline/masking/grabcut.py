@@ -73,7 +73,7 @@ def first_seeds(sphere: np.ndarray, background: np.ndarray, seed_radius: float,
 def hull_seeds(hull: np.ndarray, keep_out: np.ndarray | None, background: np.ndarray, floor: np.ndarray | None,
                erode_px: int, band_px: int, clipped: np.ndarray | None = None,
                known_object: np.ndarray | None = None, core_fraction: float = 0.0,
-               core_hull: np.ndarray | None = None) -> np.ndarray:
+               core_hull: np.ndarray | None = None, contact: np.ndarray | None = None) -> np.ndarray:
     """GrabCut labels from the hull's reprojection: certain object in the hull's core -- eroded by ``erode_px``
     and farther from the outline than ``core_fraction`` of its deepest pixel's distance (but not in
     ``keep_out``, where the hull is known to be wrong) and on clipped highlights inside the hull (a glossy
@@ -82,7 +82,9 @@ def hull_seeds(hull: np.ndarray, keep_out: np.ndarray | None, background: np.nda
     seen -- except the floor inside the hull, which is only probable background: the bottom rim of a glossy object
     mirrors the floor next to it at grazing angles and passes the floor test. ``known_object`` (sparse points on the
     object) is certain object wherever it is not certain background. ``core_hull`` (a tighter hull's reprojection):
-    the core is eroded from it instead, and the rest of ``hull`` is probable object."""
+    the core is eroded from it instead, and the rest of ``hull`` is probable object. ``contact`` (where the hull
+    meets the support plane) is certain object too, up to the hull's outline: the bottom rim of a glossy object
+    mirrors the floor beside it, and colour alone gives it to the floor."""
     h8 = hull.astype(np.uint8)
     seeds = np.full(hull.shape, cv2.GC_BGD, np.uint8)
     seeds[cv2.dilate(h8, disc(band_px)) > 0] = cv2.GC_PR_BGD
@@ -95,6 +97,8 @@ def hull_seeds(hull: np.ndarray, keep_out: np.ndarray | None, background: np.nda
         # its deep core, so GrabCut can trim the rest by colour; forced, it would keep the wedge in every round.
         inside = cv2.distanceTransform(h8, cv2.DIST_L2, 5)
         core &= inside > core_fraction * float(inside.max(initial=0.0))
+    if contact is not None:
+        core |= contact & hull
     if keep_out is not None:
         core &= ~keep_out
     if clipped is not None:

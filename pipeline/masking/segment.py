@@ -20,7 +20,7 @@ from .parallel import MapViews, serial
 from .support_plane import find_support_plane, floor_evidence
 from .sweeps import floor_through_hull, front_evidence, occluded_region, occluder_evidence
 from .tracks import LABELS, Tracks, label_points, seed_maps, track_plane
-from .views import Plane, SegmentOptions, View, disc, neighbours, sphere_distance, spread
+from .views import Plane, SegmentOptions, View, disc, neighbours, pixel_rays, sphere_distance, spread
 
 log = logging.getLogger("orca.masks")
 
@@ -346,31 +346,45 @@ def final_mask(colour: np.ndarray, hull: np.ndarray, background: np.ndarray, occ
 
 def hull_evidence(view: View, volume: np.ndarray, max_votes: float, near: Sequence[View], around: Sequence[View],
                   plane: Plane | None, opts: SegmentOptions, core_votes: float | None = None
-                  ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, np.ndarray | None]:
-    """One view's ``(depth, front, through, core)``: where its rays enter the hull ``volume < max_votes``
+                  ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, np.ndarray | None, np.ndarray | None]:
+    """One view's ``(depth, front, through, core, contact)``: where its rays enter the hull ``volume < max_votes``
     (:func:`.hull.hull_depth`), and, given the support ``plane``, a prop in front of the hull
     (:func:`.sweeps.front_evidence` against ``near``) and the floor seen through it
-    (:func:`.sweeps.floor_through_hull` against ``around``), and the tighter hull ``volume < core_votes``
-    reprojected (:func:`.hull.reproject`), each None when not looked for."""
+    (:func:`.sweeps.floor_through_hull` against ``around``), the tighter hull ``volume < core_votes``
+    reprojected (:func:`.hull.reproject`), and the hull's contact with the plane (:func:`contact_band`, less the
+    dark pixels: a contact shadow is dark, a glossy rim mirroring the floor is not), each None when not looked
+    for."""
     core = reproject(volume, view, core_votes) if core_votes is not None else None
     depth = hull_depth(volume, view, max_votes)
-    front = through = None
+    front = through = contact = None
+    if plane is not None and opts.contact_height is not None:
+        contact = contact_band(view, depth, plane, opts.contact_height) & (view.image.max(-1) > opts.dark_level)
     if plane is not None and opts.front_sweep:
         front = front_evidence(view, near, plane, depth, volume, max_votes, opts)
     if plane is not None and opts.through_floor:
         through = floor_through_hull(view, around, plane, np.isfinite(depth), opts)
-    return depth, front, through, core
+    return depth, front, through, core, contact
+
+
+def contact_band(view: View, depth: np.ndarray, plane: Plane, height: float) -> np.ndarray:
+    """``(H, W)`` bool: pixels whose ray enters the hull (``depth``, :func:`.hull.hull_depth`) at most ``height``
+    (sphere radii) above the support ``plane``: where the object meets what it stands on."""
+    hit = np.isfinite(depth)
+    rays = pixel_rays(view)
+    points = view.c2w[:3, 3] + rays * np.where(hit, depth, 0.0)[..., None]
+    return hit & (plane.height(points) < height)
 
 
 def round_mask(image: np.ndarray, hull: np.ndarray, released: np.ndarray | None, background: np.ndarray,
                floor: np.ndarray | None, clipped: np.ndarray | None, objects: np.ndarray | None, core_fraction: float,
-               opts: SegmentOptions, core_hull: np.ndarray | None = None) -> np.ndarray:
+               opts: SegmentOptions, core_hull: np.ndarray | None = None, contact: np.ndarray | None = None
+               ) -> np.ndarray:
     """One view's GrabCut mask ``(H, W)`` bool in a round: seeded by the hull's reprojection ``hull``
-    (:func:`.grabcut.hull_seeds`: its core -- or ``core_hull``'s, a tighter hull's reprojection -- forced as object
-    but where ``released``), the forced core's pixels coloured like the room beside the object released
-    (:func:`.colour.release_room_colours`)."""
+    (:func:`.grabcut.hull_seeds`: its core -- or ``core_hull``'s, a tighter hull's reprojection -- and the hull's
+    ``contact`` band with the support plane forced as object but where ``released``), the forced core's pixels
+    coloured like the room beside the object released (:func:`.colour.release_room_colours`)."""
     seeds = hull_seeds(hull, released, background, floor, opts.core_erode_px, opts.band_px, clipped, objects,
-                       core_fraction, core_hull)
+                       core_fraction, core_hull, contact)
     if opts.core_colour_log_odds is not None:
         seeds = release_room_colours(image, seeds, opts.core_fraction, opts.colour_ring_px, opts.colour_bins,
                                      opts.core_colour_log_odds, opts.colour_min_pixels, opts.colour_open_px)
@@ -411,6 +425,7 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
                           (lambda: step("evidence against the hull")) if r > 0 else (lambda: None))
         hulls = [np.isfinite(f[0]) for f in found]
         cores = [f[3] for f in found]
+        contacts = [f[4] if r == opts.rounds - 1 else None for f in found]
         if r > 0:
             fronts = [f[1] for f in found]
             through = [f[2] for f in found]
@@ -425,9 +440,12 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
         # only in the few views that see it at the outline, so the hull kept it, and these masks keep it too. The
         # core is cut from a tighter hull (core_carve_share): a wedge that fewer views than carve_share see past,
         # but a good many do, is left to colour rather than forced in every round.
+        # The last round also forces where the hull meets the support plane (contacts): a glossy bottom rim mirrors
+        # the floor beside it, and the 3 px rim the core leaves to colour would go to the floor in every view.
         core = opts.core_fraction if r < opts.rounds - 1 else opts.final_core_fraction
         tasks = [(v.image, hulls[i], _released(occluded[i], fronts[i], through[i], opts), backgrounds[i], floors[i],
-                  v.clipped, evidence.objects[i], core, opts, cores[i]) for i, v in enumerate(views) if i not in fixed]
+                  v.clipped, evidence.objects[i], core, opts, cores[i], contacts[i])
+                 for i, v in enumerate(views) if i not in fixed]
         new = view_masks(run_views, round_mask, tasks, fixed, step)
         agreement = [iou(a, b) for a, b in zip(new, hulls)]
         change = [iou(a, b) for a, b in zip(new, masks)]

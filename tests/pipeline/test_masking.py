@@ -18,10 +18,12 @@ from pipeline.masking.parallel import view_workers
 from pipeline.masking.prior import PriorSphere, find_prior_sphere, in_sphere_frame, outgrown
 from pipeline.masking.segment import (
     Evidence,
+    contact_band,
     core_lost,
     final_mask,
     refine,
     refine_checked,
+    round_mask,
     segment,
     unexplained_beside,
     unexplained_pixels,
@@ -681,6 +683,52 @@ def test_a_wedge_few_views_see_past_is_in_the_hull_but_not_in_the_core_that_grab
         seeds = hull_seeds(hull, None, np.zeros_like(ball), None, 3, 4, core_hull=tight)
         assert (loose[wedge] == cv2.GC_FGD).mean() > 0.25 and (seeds[wedge] == cv2.GC_FGD).mean() < 0.05
         assert iou(grabcut(v.image, loose, 4), ball) < 0.9 < iou(grabcut(v.image, seeds, 4), ball)
+
+
+def box_votes(lo: np.ndarray, hi: np.ndarray, resolution: int = 64) -> np.ndarray:
+    """Hull votes of the axis-aligned box ``[lo, hi]`` whose trilinear interpolation is below 0.5 just inside
+    it: 0.5 plus the signed distance from its surface in voxels."""
+    ax = (np.arange(resolution) + 0.5) / (resolution / 2) - 1
+    grid = np.stack(np.meshgrid(ax, ax, ax, indexing="ij"), -1)
+    q = np.abs(grid - (lo + hi) / 2) - (hi - lo) / 2
+    distance = np.linalg.norm(np.maximum(q, 0), axis=-1) + np.minimum(q.max(-1), 0)
+    return (0.5 + distance * resolution / 2).astype(np.float32)
+
+
+def test_the_contact_band_is_where_rays_enter_the_hull_just_above_the_support_plane():
+    """A box standing on the floor z = -0.9 as the hull: the pixels whose ray enters it less than 0.1 above the
+    floor are the analytic ones (the box's bottom strip, to within the voxels), from low and higher views; a
+    box floating 0.4 above the floor has none."""
+    lo, hi = np.array([-0.25, -0.25, -0.9]), np.array([0.25, 0.25, 0.2])
+    standing, floating = box_votes(lo, hi), box_votes(lo + [0, 0, 0.4], hi)
+    for elevation in (10.0, 25.0):
+        for v in ring_views(4, size=(240, 180), elevation_deg=elevation):
+            v.K = np.array([[250.0, 0, 120], [0, 250.0, 90], [0, 0, 1]])
+            t, p = box_hit(v, lo, hi)
+            truth = np.isfinite(t) & (FLOOR.height(p) < 0.1)
+            band = contact_band(v, hull_depth(standing, v, 0.5), FLOOR, 0.1)
+            assert truth.sum() > 100 and iou(band, truth) > 0.8
+            assert not contact_band(v, hull_depth(floating, v, 0.5), FLOOR, 0.1).any()
+
+
+def test_a_bottom_rim_mirroring_the_carpet_is_kept_when_the_contact_band_is_forced():
+    """A brass disc whose bottom rim (its outer 4 px below the centre) mirrors the red carpet: the hull is the
+    disc, and GrabCut, its core forced but the rim outside the core, gives most of the rim to the carpet; with the
+    disc's lower part forced as the hull's contact with the floor it keeps all of it."""
+    rng = np.random.default_rng(2)
+    yy, xx = np.mgrid[:120, :160]
+    r2 = (yy - 60) ** 2 + (xx - 70) ** 2
+    disc_ = r2 < 30**2
+    rim = disc_ & (r2 >= 26**2) & (yy > 68)
+    image = np.clip(rng.normal((150, 40, 60), 10, (120, 160, 3)), 0, 255)
+    image[disc_ & ~rim] = np.clip(rng.normal((170, 130, 60), 10, ((disc_ & ~rim).sum(), 3)), 0, 255)
+    image = image.astype(np.uint8)
+    none = np.zeros_like(disc_)
+    opts = SegmentOptions()
+    without = round_mask(image, disc_, None, none, None, None, None, 0.0, opts)
+    forced = round_mask(image, disc_, None, none, None, None, None, 0.0, opts, contact=disc_ & (yy > 68))
+    assert (without & rim).mean() / rim.mean() < 0.5
+    assert (forced & rim).mean() / rim.mean() > 0.95 and iou(forced, disc_) > 0.97
 
 
 def test_colour_log_odds_favour_the_region_a_colour_is_frequent_in():
