@@ -345,20 +345,21 @@ def final_mask(colour: np.ndarray, hull: np.ndarray, background: np.ndarray, occ
 
 
 def hull_evidence(view: View, volume: np.ndarray, max_votes: float, near: Sequence[View], around: Sequence[View],
-                  plane: Plane | None, opts: SegmentOptions, core_votes: float | None = None
+                  plane: Plane | None, opts: SegmentOptions, core_votes: float | None = None,
+                  contact_height: float | None = None
                   ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, np.ndarray | None, np.ndarray | None]:
     """One view's ``(depth, front, through, core, contact)``: where its rays enter the hull ``volume < max_votes``
     (:func:`.hull.hull_depth`), and, given the support ``plane``, a prop in front of the hull
     (:func:`.sweeps.front_evidence` against ``near``) and the floor seen through it
     (:func:`.sweeps.floor_through_hull` against ``around``), the tighter hull ``volume < core_votes``
-    reprojected (:func:`.hull.reproject`), and the hull's contact with the plane (:func:`contact_band`, less the
-    dark pixels: a contact shadow is dark, a glossy rim mirroring the floor is not), each None when not looked
-    for."""
+    reprojected (:func:`.hull.reproject`), and the hull's contact with the plane up to ``contact_height``
+    (:func:`contact_band`, less the dark pixels: a contact shadow is dark, a glossy rim mirroring the floor is not),
+    each None when not looked for."""
     core = reproject(volume, view, core_votes) if core_votes is not None else None
     depth = hull_depth(volume, view, max_votes)
     front = through = contact = None
-    if plane is not None and opts.contact_height is not None:
-        contact = contact_band(view, depth, plane, opts.contact_height) & (view.image.max(-1) > opts.dark_level)
+    if plane is not None and contact_height is not None:
+        contact = contact_band(view, depth, plane, contact_height) & (view.image.max(-1) > opts.dark_level)
     if plane is not None and opts.front_sweep:
         front = front_evidence(view, near, plane, depth, volume, max_votes, opts)
     if plane is not None and opts.through_floor:
@@ -415,17 +416,18 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
         votes = carve_votes(opts, n)
         core_votes = core_carve_votes(opts, n)
         core_max = None if core_votes is None else core_votes - 0.5
+        contact_height = opts.contact_height if r == opts.rounds - 1 else None  # only the last round forces it
         step("carve")
         # Props in front of the object inside the sphere are found anew against each round's hull, from the second
         # (the sphere prior's masks make a hull too loose to have much in front of it).
         found = run_views(hull_evidence, [(v, volume, votes - 0.5, [views[j] for j in near[i]],
                                            [views[j] for j in around[i]], plane if r > 0 and i not in fixed else None,
-                                           opts, core_max if i not in fixed else None)
+                                           opts, core_max if i not in fixed else None, contact_height)
                                           for i, v in enumerate(views)],
                           (lambda: step("evidence against the hull")) if r > 0 else (lambda: None))
         hulls = [np.isfinite(f[0]) for f in found]
         cores = [f[3] for f in found]
-        contacts = [f[4] if r == opts.rounds - 1 else None for f in found]
+        contacts = [f[4] for f in found]
         if r > 0:
             fronts = [f[1] for f in found]
             through = [f[2] for f in found]

@@ -594,18 +594,18 @@ def test_photos_left_without_a_camera_get_one_in_the_relaxed_pass(sfm_sphere_dec
     """The second pass (poses.relaxed_min_inliers) continues a model with the absolute pose's bars lowered: photos
     taken out of a full model of the sphere capture come back where they were; with a bar no photo reaches,
     none does (the bar is what the pass sets)."""
-    from pipeline.sfm import _mapper_options, continued, largest_first, relaxed_options, verification_options
+    from pipeline.sfm import _mapper_options, continued, largest_first, match_features, relaxed_options
     from pipeline.signals import import_pycolmap
 
     pycolmap = import_pycolmap()
     images, db = sfm_sphere_decode / "srgb", tmp_path / "database.db"
     config = PosesConfig(num_threads=2)
     # as the stage does it, so the model is the same on every run: the images numbered in name order before the
-    # extractor's threads number them as they finish, the verification's RANSAC seeded
+    # extractor's threads number them as they finish, matched by the stage's matcher (its verification seeded)
     pycolmap.Database.open(db).close()
     pycolmap.import_images(db, images, pycolmap.CameraMode.SINGLE)
     pycolmap.extract_features(db, images, camera_mode=pycolmap.CameraMode.SINGLE)
-    pycolmap.match_exhaustive(db, verification_options=verification_options(config, None))
+    match_features(db, sorted(p.stem for p in images.glob("*.png")), tmp_path, config, 2)
     (tmp_path / "full").mkdir()
     full = largest_first(pycolmap.incremental_mapping(db, images, tmp_path / "full",
                                                       _mapper_options(config, [], 2, 20)))[0]
