@@ -449,7 +449,9 @@ class MasksConfig(StrictModel):
         3.0, ge=1, description="...up to this many times the poses stage's radius (1: the poses stage's sphere as is)"
     )
     prior_touch_share: float = Field(
-        0.25, ge=0, le=1, description="...'many views': more than this share of them"
+        0.1, ge=0, le=1, description="...'many views': more than this share of them (low: a part leaving the sphere "
+        "towards or away from a camera ends inside the sphere's image, so only the views that see it leave at the "
+        "outline count)"
     )
     tracks: bool = Field(
         True, description="seed the masks with the poses stage's sparse points: in each photo that observed a point, "

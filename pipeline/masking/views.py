@@ -134,7 +134,7 @@ class SegmentOptions:
     through_views: int = 40
     prior_growth: float = 1.5
     prior_max_growth: float = 3.0
-    prior_touch_share: float = 0.25
+    prior_touch_share: float = 0.1
     tracks: bool = True
     track_plane_tolerance: float = 0.02
     track_seed_px: int = 1

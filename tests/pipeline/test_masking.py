@@ -533,6 +533,21 @@ def test_the_sphere_prior_grows_until_it_contains_an_object_larger_than_the_pose
     assert prior.probes[-1]["touching_views"] <= SegmentOptions().prior_touch_share * len(views)
 
 
+def test_the_sphere_prior_grows_for_a_rod_that_leaves_it_towards_most_cameras():
+    """A rod (radius 0.12) from x = -0.3 to 1.9, 24 views on a low ring: where it leaves the sphere towards or away
+    from a camera its cut end lies inside the sphere's image, so only the views that see it leave at the outline
+    touch it -- 6 of 24 at 1.5 times the first sphere. The prior still grows until the whole rod is inside."""
+    views = ring_views(24, size=(200, 150), elevation_deg=15.0)
+    a, b, r = np.array([-0.3, 0.0, 0.0]), np.array([1.9, 0.0, 0.0]), 0.12
+    balls = [a + t * (b - a) for t in np.linspace(0.0, 1.0, 40)]
+    rod = {v.name: np.logical_or.reduce([ball_silhouette(v, p, r) for p in balls]) for v in views}
+    prior = find_prior_sphere(views, SegmentOptions(),
+                              lambda framed, opts, centre, radius: [rod[v.name] & (sphere_distance(v) < 1.0)
+                                                                    for v in framed])
+    assert [p["radius"] for p in prior.probes][:2] == [1.0, 1.5] and prior.probes[1]["touching_views"] <= 6
+    assert max(np.linalg.norm(a - prior.centre), np.linalg.norm(b - prior.centre)) + r < prior.radius
+
+
 def test_the_sphere_prior_stays_the_poses_sphere_when_the_object_is_inside():
     views = ring_views(12, size=(200, 150))
     prior = find_prior_sphere(views, SegmentOptions(), clipped_ball_masks(np.array([0.1, 0.0, 0.0]), 0.6, views))

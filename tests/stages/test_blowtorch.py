@@ -5,6 +5,8 @@ photos re-encoded as a phone would give them, as bench/phone_photos.py runs them
 
 from __future__ import annotations
 
+import json
+
 import pytest
 from helpers import TESTDATA
 
@@ -20,6 +22,10 @@ OVERRIDES = ["poses.num_threads=2"]
 ROTATION_DEG_MEDIAN, ROTATION_DEG_MAX = 0.5, 2.0
 CENTRE_MEDIAN_FRACTION, CENTRE_MAX_FRACTION = 0.02, 0.05  # of the cameras' mean distance from their centroid
 IOU_MEDIAN, IOU_WORST = 0.95, 0.90
+# Every third photo with the reference cameras: the sphere the masks ran in (the poses stage's is 1; the probes
+# stopped at 1.5 with the tips cut before the share of views touching its outline was lowered) and the masks'
+# floor under what was measured (0.811 / 0.719).
+SUBSET_SPHERE_MIN, SUBSET_IOU_MEDIAN, SUBSET_IOU_WORST = 1.5, 0.79, 0.69
 # Phone-like photos: a short training (the gains settle in a few hundred joint iterations) and how closely the
 # gains must come back: the median relative error over photos and channels (0.10 measured) and the share of the
 # applied exposures' variance recovered (0.81 measured). Not the largest error (0.45): a photo whose view of the
@@ -72,6 +78,25 @@ def test_the_cameras_that_register_agree_with_the_reference(tmp_path):
     assert poses["rotation_deg_median"] <= ROTATION_DEG_MEDIAN and poses["rotation_deg_max"] <= ROTATION_DEG_MAX
     assert poses["center_median_fraction"] <= CENTRE_MEDIAN_FRACTION
     assert poses["center_max_fraction"] <= CENTRE_MAX_FRACTION
+
+
+@pytest.mark.slow
+def test_masks_of_every_third_photo_with_the_reference_cameras_keep_the_whole_object(tmp_path):
+    """23 photos (every third) at 530x353 with the photographers' cameras, through ``orca decode``, ``orca poses``
+    (the LLFF import) and ``orca masks``: the burner and the handle reach past the 1.5 sphere in only 5 views'
+    probes (they leave it towards the cameras), and the sphere must still grow to hold them. Measured 0.811 /
+    0.719 (median / worst view); with the sphere stopped at 1.5, the tips cut in every view, 0.779. Below the
+    issue's 0.95 / 0.90: carpet between the handle and the tank, which 23 views carve less well, stays."""
+    photos = select_photos(DATASET, every=3)
+    capture = build_capture(tmp_path / "blowtorch", photos, DOWNSCALE, known_poses=DATASET)
+    runs = run_front_end(capture, tmp_path / "results", OVERRIDES)
+    failed = [r for r in runs.values() if r.returncode]
+    assert not failed, f"{failed[0].stage} failed:\n{failed[0].log[-3000:]}"
+    report = json.loads((tmp_path / "results" / "masks" / "masks_report.json").read_text())
+    masks = score(tmp_path / "results", photos, DATASET)["masks"]
+    print(report["sphere_prior"]["probes"], {k: v for k, v in masks.items() if k != "per_view"})
+    assert report["sphere_prior"]["radius"] > SUBSET_SPHERE_MIN
+    assert masks["iou_median"] >= SUBSET_IOU_MEDIAN and masks["iou_worst"] >= SUBSET_IOU_WORST, masks["worst_view"]
 
 
 @pytest.mark.slow
