@@ -1,6 +1,7 @@
 """Real photos of a glossy object. The front end: the first 16 blowtorch photos (about 290 degrees of the
 walk-around) decoded at 530x353, through ``orca decode``, ``orca poses`` and ``orca masks`` as
-bench/blowtorch.py runs them, scored against the photographers' COLMAP poses and object masks. Training: a few
+bench/blowtorch.py runs them, scored against the photographers' COLMAP poses and object masks; the masks alone on
+every third photo with the photographers' cameras. Training: a few
 photos re-encoded as a phone would give them, as bench/phone_photos.py runs them."""
 
 from __future__ import annotations
