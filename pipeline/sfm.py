@@ -245,26 +245,12 @@ def run_sfm(
 
     t = time.time()
     extraction = extraction_options(config, threads)
-    # Images are imported before extraction because the extractor's threads number them in the order they
-    # finish, and the ids order the matching and mapping: two runs on the same photos could give different poses.
     pycolmap.Database.open(db_path).close()
     # A retry starts from the first run's database: its features exist, and the extractor skips them.
     extracted = set(_feature_counts(db_path)) >= set(names)
     sift_dir = image_dir if not config.sift_brightness or extracted else \
         write_sift_images(image_dir, names, work / "sift_images", config.sift_brightness)
-    for g in groups:
-        reader = pycolmap.ImageReaderOptions()
-        reader.camera_model = g.model
-        if g.params is not None:
-            reader.camera_params = ",".join(f"{p:.10g}" for p in g.params)  # also marks the focal as a prior
-        if feature_masks is not None:
-            reader.mask_path = str(feature_masks)
-        colmap_names = [colmap_name(n) for n in g.names]
-        pycolmap.import_images(db_path, sift_dir, pycolmap.CameraMode.SINGLE, colmap_names, reader)
-        pycolmap.extract_features(
-            db_path, sift_dir, image_names=colmap_names, camera_mode=pycolmap.CameraMode.SINGLE,
-            reader_options=reader, extraction_options=extraction, device=pycolmap.Device.auto,
-        )
+    extract_features(db_path, sift_dir, groups, extraction, feature_masks)
     features = _feature_counts(db_path)
     seconds["features"] = time.time() - t
     log.info("SIFT: %d photos, %d-%d features each (median %d) [%.1f s]", len(names), min(features.values()),
@@ -330,6 +316,28 @@ def run_sfm(
                        num_verified, seconds, mapper, why, relaxed)
     _check_registered(result, names, config, folder)
     return result
+
+
+def extract_features(db_path: Path, image_dir: Path, groups: Sequence[CameraGroup],
+                     extraction: pycolmap.FeatureExtractionOptions, feature_masks: Path | None = None) -> None:
+    """SIFT features of the photos of ``groups`` (``image_dir/<name>.png``) into the existing database ``db_path``,
+    one COLMAP camera per group with its intrinsics prior. Each group's images are imported in the order of its
+    names first, so that their ids (which order the matching and mapping) are the same on every run: the
+    extractor's threads number the images they import in the order they finish."""
+    pycolmap = import_pycolmap()
+    for g in groups:
+        reader = pycolmap.ImageReaderOptions()
+        reader.camera_model = g.model
+        if g.params is not None:
+            reader.camera_params = ",".join(f"{p:.10g}" for p in g.params)  # also marks the focal as a prior
+        if feature_masks is not None:
+            reader.mask_path = str(feature_masks)
+        colmap_names = [colmap_name(n) for n in g.names]
+        pycolmap.import_images(db_path, image_dir, pycolmap.CameraMode.SINGLE, colmap_names, reader)
+        pycolmap.extract_features(
+            db_path, image_dir, image_names=colmap_names, camera_mode=pycolmap.CameraMode.SINGLE,
+            reader_options=reader, extraction_options=extraction, device=pycolmap.Device.auto,
+        )
 
 
 def extraction_options(config: PosesConfig, threads: int) -> pycolmap.FeatureExtractionOptions:

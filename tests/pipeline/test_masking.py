@@ -515,11 +515,15 @@ def ball_silhouette(view: View, centre: np.ndarray, radius: float) -> np.ndarray
     return ball_distance(view, centre) < radius
 
 
-def clipped_ball_masks(centre: np.ndarray, radius: float, views: list[View]):
-    """A stand-in for the segmentation: the ball's exact silhouettes, cut by the (framed) unit sphere's image --
-    what the sphere prior does to an object larger than the sphere."""
-    silhouettes = {v.name: ball_silhouette(v, centre, radius) for v in views}
+def clipped_masks(silhouettes: dict[str, np.ndarray]):
+    """A stand-in for the segmentation: each view's exact silhouette (by view name), cut by the (framed) unit
+    sphere's image -- what the sphere prior does to an object larger than the sphere."""
     return lambda framed, opts, centre, radius: [silhouettes[v.name] & (sphere_distance(v) < 1.0) for v in framed]
+
+
+def clipped_ball_masks(centre: np.ndarray, radius: float, views: list[View]):
+    """:func:`clipped_masks` of a ball."""
+    return clipped_masks({v.name: ball_silhouette(v, centre, radius) for v in views})
 
 
 def test_the_sphere_prior_grows_until_it_contains_an_object_larger_than_the_poses_sphere():
@@ -541,9 +545,7 @@ def test_the_sphere_prior_grows_for_a_rod_that_leaves_it_towards_most_cameras():
     a, b, r = np.array([-0.3, 0.0, 0.0]), np.array([1.9, 0.0, 0.0]), 0.12
     balls = [a + t * (b - a) for t in np.linspace(0.0, 1.0, 40)]
     rod = {v.name: np.logical_or.reduce([ball_silhouette(v, p, r) for p in balls]) for v in views}
-    prior = find_prior_sphere(views, SegmentOptions(),
-                              lambda framed, opts, centre, radius: [rod[v.name] & (sphere_distance(v) < 1.0)
-                                                                    for v in framed])
+    prior = find_prior_sphere(views, SegmentOptions(), clipped_masks(rod))
     assert [p["radius"] for p in prior.probes][:2] == [1.0, 1.5] and prior.probes[1]["touching_views"] <= 6
     assert max(np.linalg.norm(a - prior.centre), np.linalg.norm(b - prior.centre)) + r < prior.radius
 

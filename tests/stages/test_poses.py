@@ -594,18 +594,28 @@ def test_photos_left_without_a_camera_get_one_in_the_relaxed_pass(sfm_sphere_dec
     """The second pass (poses.relaxed_min_inliers) continues a model with the absolute pose's bars lowered: photos
     taken out of a full model of the sphere capture come back where they were; with a bar no photo reaches,
     none does (the bar is what the pass sets)."""
-    from pipeline.sfm import _mapper_options, continued, largest_first, match_features, relaxed_options
+    from pipeline.sfm import (
+        CameraGroup,
+        _mapper_options,
+        continued,
+        extract_features,
+        extraction_options,
+        largest_first,
+        match_features,
+        relaxed_options,
+    )
     from pipeline.signals import import_pycolmap
 
     pycolmap = import_pycolmap()
     images, db = sfm_sphere_decode / "srgb", tmp_path / "database.db"
     config = PosesConfig(num_threads=2)
-    # as the stage does it, so the model is the same on every run: the images numbered in name order before the
-    # extractor's threads number them as they finish, matched by the stage's matcher (its verification seeded)
+    # as the stage does it, so the model is the same on every run: images numbered in name order, matched by the
+    # stage's matcher (its verification seeded)
+    names = sorted(p.stem for p in images.glob("*.png"))
     pycolmap.Database.open(db).close()
-    pycolmap.import_images(db, images, pycolmap.CameraMode.SINGLE)
-    pycolmap.extract_features(db, images, camera_mode=pycolmap.CameraMode.SINGLE)
-    match_features(db, sorted(p.stem for p in images.glob("*.png")), tmp_path, config, 2)
+    extract_features(db, images, [CameraGroup(tuple(names), "SIMPLE_RADIAL", None, "COLMAP's guess")],
+                     extraction_options(config, 2))
+    match_features(db, names, tmp_path, config, 2)
     (tmp_path / "full").mkdir()
     full = largest_first(pycolmap.incremental_mapping(db, images, tmp_path / "full",
                                                       _mapper_options(config, [], 2, 20)))[0]
