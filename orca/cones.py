@@ -90,6 +90,9 @@ from torch import Tensor
 from orca.geometry_utils import dot, orthonormal_basis, reflect, safe_norm, safe_normalize
 
 Method = Literal["closed_form", "bounding_rays", "naive"]
+# vergences within this many machine epsilons of zero are a collimated beam: rounding, not curvature (a beam
+# that near collimation has its apex far past the max_apex_ratio cap anyway)
+COLLIMATED_ULPS = 16
 
 __all__ = [
     "VirtualCone",
@@ -272,8 +275,11 @@ def closed_form_cone(
     a = -(2 * kappa + c)
     b = -(2 * kappa * c * c + c)
     Q = 0.5 * (a * a + b * b)  # = (c s)² (u_t² + u_s²)/2
-    tiny = torch.finfo(Q.dtype).eps ** 2
-    collimated = Q <= tiny  # both vergences vanish: only concave, normal incidence, s = focal length
+    eps = torch.finfo(Q.dtype).eps
+    tiny = eps**2
+    # both vergences vanish (concave, normal incidence, s = focal length) to within the rounding of computing
+    # them: at the exact focus one of a, b can come out 0 and the other a few ulps, by CPU (AVX2 against AVX-512)
+    collimated = Q <= (COLLIMATED_ULPS * eps) ** 2
     Q_safe = Q.clamp_min(tiny)
     sqrt_Q = Q_safe.sqrt()
     # t_start = −z* = −(u_t + u_s)/(u_t² + u_s²)
