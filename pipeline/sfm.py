@@ -208,6 +208,23 @@ def sequential_pairs(names: Sequence[str], overlap: int, wrap: bool = True) -> l
     return [(names[i], names[j]) for i, j in sorted(pairs)]
 
 
+def viewing_pairs(names: Sequence[str], c2w: np.ndarray, k: int) -> list[tuple[str, str]]:
+    """Each photo with the ``k`` photos whose views are nearest its own, for matching with known cameras.
+
+    A view is its optical axis (unit) and its centre over the cameras' spread (median distance from their mean),
+    compared as one 6-vector: around an object the axes separate the photos, in a forward-facing capture (axes
+    alike) the centres do. ``c2w``: (N, 4, 4) camera-to-world, OpenCV axes (+z forward)."""
+    c2w = np.asarray(c2w, dtype=float)
+    centres = c2w[:, :3, 3]
+    spread = float(np.median(np.linalg.norm(centres - centres.mean(axis=0), axis=1))) or 1.0
+    views = np.concatenate([c2w[:, :3, 2], centres / spread], axis=1)
+    distance = np.linalg.norm(views[:, None] - views[None], axis=-1)
+    np.fill_diagonal(distance, np.inf)
+    nearest = np.argsort(distance, axis=1, kind="stable")[:, :min(k, len(names) - 1)]
+    pairs = {(min(i, int(j)), max(i, int(j))) for i, row in enumerate(nearest) for j in row}
+    return [(names[i], names[j]) for i, j in sorted(pairs)]
+
+
 # -------------------------------------------------------------------------------------------------- SfM
 
 
@@ -351,12 +368,13 @@ def extraction_options(config: PosesConfig, threads: int) -> pycolmap.FeatureExt
 
 
 def match_features(db_path: Path, names: Sequence[str], work: Path, config: PosesConfig, threads: int,
-                   retry: RetryMatching | None = None) -> tuple[str, int, int]:
+                   retry: RetryMatching | None = None,
+                   pairs: list[tuple[str, str]] | None = None) -> tuple[str, int, int]:
     """Match the features in ``db_path`` (exhaustively up to ``exhaustive_max_images`` photos, else neighbours in
-    name order; with ``retry``, as it says) and verify the pairs' geometry. Returns the matcher used, the pairs
-    matched and the pairs verified."""
+    name order; with ``retry`` or ``pairs``, as they say) and verify the pairs' geometry. Returns the matcher
+    used, the pairs matched and the pairs verified."""
     pycolmap = import_pycolmap()
-    matcher = config.matcher if retry is None else "neighbours"
+    matcher = "neighbours" if retry is not None else "viewing" if pairs is not None else config.matcher
     if matcher == "auto":
         matcher = "exhaustive" if len(names) <= config.exhaustive_max_images else "sequential"
     matching = pycolmap.FeatureMatchingOptions()
@@ -367,9 +385,10 @@ def match_features(db_path: Path, names: Sequence[str], work: Path, config: Pose
         pycolmap.match_exhaustive(db_path, matching_options=matching, verification_options=verification,
                                   device=pycolmap.Device.auto)
     else:
-        ordered = sorted(names)
-        pairs = (sequential_pairs(ordered, config.sequential_overlap) if retry is None
-                 else neighbour_pairs(retry.order, retry.overlap))
+        if retry is not None:
+            pairs = neighbour_pairs(retry.order, retry.overlap)
+        elif pairs is None:
+            pairs = sequential_pairs(sorted(names), config.sequential_overlap)
         num_pairs = len(pairs)
         pair_file = work / "pairs.txt"
         pair_file.write_text("".join(f"{colmap_name(a)} {colmap_name(b)}\n" for a, b in pairs))
@@ -407,7 +426,8 @@ def triangulate_known(posed: Posed, image_dir: Path, work: Path, config: PosesCo
     # the images are in the database already: the extractor keeps their cameras and only adds features
     pycolmap.extract_features(db_path, image_dir, image_names=[colmap_name(n) for n in posed.names],
                               extraction_options=extraction_options(config, threads), device=pycolmap.Device.auto)
-    matcher, num_pairs, num_verified = match_features(db_path, posed.names, work, config, threads)
+    pairs = viewing_pairs(posed.names, posed.c2w, config.known_pairs) if config.known_pairs else None
+    matcher, num_pairs, num_verified = match_features(db_path, posed.names, work, config, threads, pairs=pairs)
     (work / "sparse").mkdir()
     options = pycolmap.IncrementalPipelineOptions()
     options.num_threads = threads

@@ -5,8 +5,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from pipeline.cameras import look_at
 from pipeline.config import PosesConfig
-from pipeline.sfm import equalized_gray, extraction_options, required_registered, sequential_pairs
+from pipeline.sfm import equalized_gray, extraction_options, required_registered, sequential_pairs, viewing_pairs
 from pipeline.signals import import_pycolmap
 
 
@@ -19,6 +20,35 @@ def test_sequential_pairs_wrap_around_the_capture():
     assert ("IMG_00", "IMG_05") not in pairs
     assert all(a < b for a, b in pairs)
     assert len(sequential_pairs(names, overlap=20)) == 45  # more neighbours than photos: every pair once
+
+
+def test_known_cameras_pair_each_photo_with_its_nearest_views():
+    """Two rings around an object, shuffled names: each photo pairs with the photos beside it on its own ring and
+    the nearest of the other ring, never across the object; forward-facing cameras in a row (axes alike) pair by
+    position."""
+    rng = np.random.default_rng(0)
+    angles = np.radians(np.arange(0, 360, 15))
+    eyes = [(3 * np.cos(a), 3 * np.sin(a), h) for h in (0.5, 2.0) for a in angles]
+    order = rng.permutation(len(eyes))
+    names = [f"IMG_{i:02d}" for i in range(len(eyes))]
+    c2w = np.stack([look_at(np.array(eyes[i]), np.zeros(3)) for i in order])
+    pairs = viewing_pairs(names, c2w, k=4)
+    assert all(a < b for a, b in pairs) and len(set(pairs)) == len(pairs)
+    assert len(names) * 4 / 2 <= len(pairs) <= len(names) * 4
+    eye = np.array(eyes)[order]
+    by_name = dict(zip(names, eye))
+    partners = {n: set() for n in names}
+    for a, b in pairs:
+        partners[a].add(b)
+        partners[b].add(a)
+    for n, ps in partners.items():
+        assert len(ps) >= 4
+        apart = [np.degrees(np.arccos(np.clip(by_name[n][:2] @ by_name[p][:2] / 9, -1, 1))) for p in ps]
+        assert max(apart) <= 30.0 + 1e-6, (n, apart)  # within two steps of the ring, or straight above/below
+    row = np.stack([look_at(np.array([x, -3.0, 0.0]), np.array([x, 0.0, 0.0])) for x in range(10)])
+    beside = {(str(i), str(i + 1)) for i in range(9)}
+    assert set(viewing_pairs([str(i) for i in range(10)], row, k=2)) == beside | {("0", "2"), ("7", "9")}  # the ends
+    assert len(viewing_pairs(names[:3], c2w[:3], k=12)) == 3  # more neighbours than photos: every pair once
 
 
 def test_required_registered_uses_count_and_fraction():
