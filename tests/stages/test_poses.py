@@ -137,6 +137,10 @@ def test_known_cameras_get_sparse_points_triangulated_with_them(sfm_sphere_captu
     points = load_sparse_points(tmp_path / "poses" / "sparse", cams)
     assert len(points.xyz) > 100 and all(len(o) >= 3 for o in points.observers)
     assert not (tmp_path / "poses" / "work").exists()
+    # each photo matched with its 4 nearest views only: fewer pairs, still hundreds of points
+    near = run(capture, sfm_sphere_decode, tmp_path / "near", PosesConfig(num_threads=2, known_pairs=4))
+    few = load_poses(tmp_path / "near").reconstruction()
+    assert near.registered == len(truth) and 100 < few.num_points3D() < rec.num_points3D(), few.summary()
     # with it off, the known cameras alone
     off = run(capture, sfm_sphere_decode, tmp_path / "off", PosesConfig(num_threads=2, triangulate_known=False))
     assert off.registered == len(truth) and load_poses(tmp_path / "off").reconstruction() is None
