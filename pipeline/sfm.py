@@ -214,11 +214,13 @@ def viewing_pairs(names: Sequence[str], c2w: np.ndarray, k: int) -> list[tuple[s
     A view is its optical axis (unit) and its centre over the cameras' spread (median distance from their mean),
     compared as one 6-vector: around an object the axes separate the photos, in a forward-facing capture (axes
     alike) the centres do. ``c2w``: (N, 4, 4) camera-to-world, OpenCV axes (+z forward)."""
+    from scipy.spatial.distance import cdist
+
     c2w = np.asarray(c2w, dtype=float)
     centres = c2w[:, :3, 3]
     spread = float(np.median(np.linalg.norm(centres - centres.mean(axis=0), axis=1))) or 1.0
     views = np.concatenate([c2w[:, :3, 2], centres / spread], axis=1)
-    distance = np.linalg.norm(views[:, None] - views[None], axis=-1)
+    distance = cdist(views, views)
     np.fill_diagonal(distance, np.inf)
     nearest = np.argsort(distance, axis=1, kind="stable")[:, :min(k, len(names) - 1)]
     pairs = {(min(i, int(j)), max(i, int(j))) for i, row in enumerate(nearest) for j in row}
