@@ -15,8 +15,8 @@ from .support_plane import plane_cost, ranked_cost, window_difference
 from .views import Plane, SegmentOptions, View, disc, pixel_rays, sphere_box
 
 
-def outside_cost(view: View, others: Sequence[View], rank: int, step_px: float = 1.0, near: float = 0.25,
-                 far: float = 4.0, match_exposure: bool = False) -> tuple[np.ndarray, tuple[int, int, int, int]] | None:
+def outside_cost(view: View, others: Sequence[View], rank: int, step_px: float, near: float, far: float,
+                 match_exposure: bool = False) -> tuple[np.ndarray, tuple[int, int, int, int]] | None:
     """How well something *outside* the unit sphere -- a prop in front of it, a wall or prop behind it --
     explains each pixel of the sphere's image: the best ``rank``-th neighbour cost of :func:`plane_cost` over
     fronto-parallel planes at depths from ``near`` to ``far`` times the camera's distance from the centre,
@@ -77,7 +77,7 @@ def corner_strength(image: np.ndarray, window: int = 5) -> np.ndarray:
 def occluder_evidence(view: View, others: Sequence[View], opts: SegmentOptions) -> np.ndarray:
     """``(H, W)`` bool: textured, unclipped pixels of the sphere's image that a surface outside the sphere
     explains (:func:`outside_cost`): a prop in front of the object, the room behind it."""
-    found = outside_cost(view, others, opts.sweep_rank, step_px=opts.sweep_step_px, far=opts.sweep_far,
+    found = outside_cost(view, others, opts.sweep_rank, opts.sweep_step_px, opts.sweep_near, opts.sweep_far,
                          match_exposure=opts.match_exposure)
     if found is None:
         return np.zeros(view.shape, bool)
