@@ -35,6 +35,11 @@ if [ ! -x "$VENV/bin/python" ]; then
     say "creating virtual environment $VENV"
     "$PYTHON" -m venv "$VENV"
 fi
+# venv installs pip last: a creation stopped half way (Ctrl-C, a killed CI job) leaves an environment without it
+if ! "$VENV/bin/python" -m pip --version >/dev/null 2>&1; then
+    say "$VENV has no pip (its creation was interrupted): installing it"
+    "$VENV/bin/python" -m ensurepip --upgrade --default-pip >/dev/null
+fi
 
 # Re-install only when what defines the environment changed.
 STAMP="$VENV/.orca-setup-stamp"
