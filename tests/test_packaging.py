@@ -104,3 +104,24 @@ def test_nerfstudio_constraints_keep_both_opencv_distributions_at_one_version():
     pycolmap = next(r for r in _requirements() if canonicalize_name(r.name) == "pycolmap")
     assert pycolmap.specifier.contains(pins["pycolmap"]) and pins["pycolmap"] == _pins(ROOT / "constraints.txt")[
         "pycolmap"]
+
+
+def test_setup_gives_pip_back_to_an_environment_whose_creation_was_interrupted(tmp_path):
+    """``python -m venv`` installs pip last: stopped before that, the environment has a python and no pip, and every
+    later set-up failed with "No module named pip". Set-up installs pip into it, and installs nothing else when the
+    environment's stamp says it is current (an unknown ORCA_TORCH makes any install fail, and the test with it)."""
+    import hashlib
+    import os
+    import subprocess
+
+    venv, torch = tmp_path / "venv", "orca-no-such-package==0"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)
+    definition = b"".join((ROOT / name).read_bytes() for name in ("pyproject.toml", "scripts/setup.sh",
+                                                                    "constraints.txt"))
+    (venv / ".orca-setup-stamp").write_text(f"{hashlib.sha256(definition).hexdigest()[:16]} {torch}\n")
+    done = subprocess.run(["bash", str(ROOT / "scripts" / "setup.sh")], capture_output=True, text=True,
+                          env={**os.environ, "ORCA_VENV": str(venv), "ORCA_TORCH": torch, "ORCA_CONSTRAINTS": str(
+                              ROOT / "constraints.txt")})
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "no pip" in done.stderr and "environment up to date" in done.stderr
+    subprocess.run([str(venv / "bin" / "python"), "-m", "pip", "--version"], check=True, capture_output=True)
