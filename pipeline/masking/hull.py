@@ -164,9 +164,9 @@ def hull_depth(volume: np.ndarray, view: View, max_votes: float) -> np.ndarray:
 
 
 def clearance(volume: np.ndarray, max_votes: float) -> np.ndarray:
-    """``(X, Y, Z)`` float32: each voxel's distance to the nearest voxel of the hull ``volume < max_votes``
-    ``(X, Y, Z)``, in voxels along the longest axis (the chessboard distance, a lower bound of the straight one;
-    0 in the hull)."""
+    """``(X, Y, Z)`` float32: for each voxel of ``volume`` ``(X, Y, Z)``, its distance to the nearest voxel of the
+    hull ``volume < max_votes`` in voxels along the longest axis (the chessboard distance, a lower bound of the
+    straight one; 0 in the hull)."""
     from scipy.ndimage import distance_transform_cdt
 
     return distance_transform_cdt(volume >= max_votes, metric="chessboard").astype(np.float32)
