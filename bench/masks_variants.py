@@ -35,7 +35,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: bench.blowtorch's helpers
 
 from bench.blowtorch import DATASET, commit, machine, poses_undistortion, reference_mask  # noqa: E402
-from pipeline.cameras import load_cameras  # noqa: E402
+from pipeline.cameras import CameraSet, load_cameras  # noqa: E402
 from pipeline.config import MasksConfig  # noqa: E402
 from pipeline.layout import CAMERAS_JSON, POSES, SPARSE, USER_MASKS  # noqa: E402
 from pipeline.masking.parallel import MapViews, view_workers  # noqa: E402
@@ -43,7 +43,7 @@ from pipeline.masking.prior import find_prior_sphere, framed_options, in_sphere_
 from pipeline.masking.scale import load_view  # noqa: E402
 from pipeline.masking.segment import gather_evidence, probe_masks, refine_checked, segment_options  # noqa: E402
 from pipeline.masking.tracks import tracks_for_views  # noqa: E402
-from pipeline.masking.views import SegmentOptions  # noqa: E402
+from pipeline.masking.views import SegmentOptions, View  # noqa: E402
 from pipeline.metrics import iou  # noqa: E402
 from pipeline.results import image_folder, load_decode  # noqa: E402
 from pipeline.sparse_depth import load_sparse_points  # noqa: E402
@@ -51,16 +51,22 @@ from pipeline.sparse_depth import load_sparse_points  # noqa: E402
 RESULTS = Path(__file__).parent / "results" / "masks_variants.jsonl"
 
 
+def working_views(results: Path, config: MasksConfig) -> tuple[CameraSet, list[View]]:
+    """The front end in ``results``: its cameras, and its photos as the masks stage sees them (``config``'s working
+    size), in the poses stage's frame."""
+    cameras = load_cameras(results / POSES / CAMERAS_JSON)
+    decoded = load_decode(image_folder(cameras, results / POSES, None))
+    scale = min(1.0, config.work_size / max(max(c.width, c.height) for c in cameras.cameras))
+    return cameras, [load_view(decoded, c, scale) for c in cameras.cameras]
+
+
 def build(results: Path, cache: Path, reference: Path | None, overrides: dict[str, Any], run_views: MapViews
           ) -> None:
     """The views, options, evidence and reference masks (at the working size) of the front end in ``results``
     (``reference``: a folder of ``<name>.png``; None: the blowtorch's, resampled like the photos)."""
-    cameras = load_cameras(results / POSES / CAMERAS_JSON)
-    names = [c.name for c in cameras.cameras]
     config = MasksConfig(**overrides)
-    decoded = load_decode(image_folder(cameras, results / POSES, None))
-    scale = min(1.0, config.work_size / max(max(c.width, c.height) for c in cameras.cameras))
-    views = [load_view(decoded, c, scale) for c in cameras.cameras]
+    cameras, views = working_views(results, config)
+    names = [c.name for c in cameras.cameras]
     tracks = None
     if (results / POSES / SPARSE).is_dir():
         points = load_sparse_points(results / POSES / SPARSE, cameras)

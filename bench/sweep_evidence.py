@@ -29,26 +29,20 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: bench.blowtorch's helpers
 
 from bench.blowtorch import commit, machine  # noqa: E402
-from pipeline.cameras import load_cameras  # noqa: E402
+from bench.masks_variants import working_views  # noqa: E402
 from pipeline.config import MasksConfig  # noqa: E402
-from pipeline.layout import CAMERAS_JSON, POSES  # noqa: E402
 from pipeline.masking.prior import in_sphere_frame  # noqa: E402
-from pipeline.masking.scale import load_view  # noqa: E402
 from pipeline.masking.segment import segment_options  # noqa: E402
 from pipeline.masking.sweeps import occluder_evidence  # noqa: E402
 from pipeline.masking.views import neighbours  # noqa: E402
-from pipeline.results import image_folder, load_decode  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "sweep_evidence.jsonl"
 
 
 def compare(results: Path, radius: float, variant: dict[str, Any], every: int) -> dict[str, Any]:
     """Every ``every``-th view's swept pixels under the defaults and under ``variant`` (SegmentOptions fields)."""
-    cameras = load_cameras(results / POSES / CAMERAS_JSON)
     config = MasksConfig()
-    decoded = load_decode(image_folder(cameras, results / POSES, None))
-    scale = min(1.0, config.work_size / max(max(c.width, c.height) for c in cameras.cameras))
-    views = [in_sphere_frame(load_view(decoded, c, scale), np.zeros(3), radius) for c in cameras.cameras]
+    views = [in_sphere_frame(v, np.zeros(3), radius) for v in working_views(results, config)[1]]
     base = segment_options(config)
     other = dataclasses.replace(base, **variant)
     near = neighbours(views, base.sweep_neighbours, base.neighbour_max_deg)
@@ -62,12 +56,11 @@ def compare(results: Path, radius: float, variant: dict[str, Any], every: int) -
         started = time.time()
         b = occluder_evidence(views[i], others, other)
         out["seconds_variant"] += time.time() - started
+        view = {"swept": int(a.sum()), "lost": int((a & ~b).sum()), "gained": int((b & ~a).sum())}
         out["views"] += 1
-        out["swept"] += int(a.sum())
-        out["lost"] += int((a & ~b).sum())
-        out["gained"] += int((b & ~a).sum())
-        print(f"  {views[i].name}: swept {int(a.sum())}, lost {int((a & ~b).sum())}, gained {int((b & ~a).sum())}",
-              flush=True)
+        for key, count in view.items():
+            out[key] += count
+        print(f"  {views[i].name}: swept {view['swept']}, lost {view['lost']}, gained {view['gained']}", flush=True)
     out["seconds_default"] = round(out["seconds_default"], 1)
     out["seconds_variant"] = round(out["seconds_variant"], 1)
     return out

@@ -138,14 +138,14 @@ def hull_depth(volume: np.ndarray, view: View, max_votes: float) -> np.ndarray:
     step_voxels = np.abs(d).max(1) / scale * (res / 2.0)  # how far a step moves, in voxels along the longest axis
     lo, hi = np.maximum(extent[0], 0), np.minimum(extent[1], res - 1)  # the samples stay in the box
     free = clearance(volume[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1], max_votes)
-    size = free.shape
+    last = np.array(free.shape) - 1
     entry = np.full(len(d), np.inf, np.float32)
     rays = np.nonzero(k_first <= k_last)[0]
     k = k_first[rays]
     while len(rays):
         t = t0[rays] + (t1[rays] - t0[rays]) * ((k + 0.5) / steps)
         points = o + d[rays] * t[:, None]
-        voxel = np.clip(np.rint((points + 1.0) * (res / 2.0) - 0.5).astype(np.int64) - lo, 0, np.array(size) - 1)
+        voxel = np.clip(np.rint((points + 1.0) * (res / 2.0) - 0.5).astype(np.int64) - lo, 0, last)
         # a trilinear sample mixes the centres less than a voxel from it (along every axis), and the point is
         # within half a voxel of its nearest centre: the next samples closer than this cannot be in the hull
         reach = free[voxel[:, 0], voxel[:, 1], voxel[:, 2]] - CLEARANCE_MARGIN
