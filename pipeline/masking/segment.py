@@ -15,7 +15,7 @@ from ..metrics import iou
 from ..object_frame import camera_up
 from .colour import release_room_colours
 from .grabcut import first_seeds, grabcut, hull_seeds
-from .hull import OUTSIDE_VOTES, carve, carve_votes, core_carve_votes, hull_depth, hull_grid, reproject
+from .hull import OUTSIDE_VOTES, carve, carve_votes, core_carve_votes, hull_depth, hull_grid, reproject, voxel_pixels
 from .parallel import MapViews, serial
 from .support_plane import find_support_plane, floor_evidence
 from .sweeps import floor_through_hull, front_evidence, occluded_region, occluder_evidence
@@ -405,6 +405,7 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
     around = spread(views, opts.through_views)
     unexplained = unexplained_pixels(views, evidence, opts) if opts.unexplained_vote < 1.0 else None
     points, index = hull_grid(opts.hull_resolution, plane)
+    pixels = voxel_pixels(points, views, run_views)
     rounds: list[dict[str, float]] = []
     hulls: list[np.ndarray] = []
     volume = np.full((opts.hull_resolution,) * 3, OUTSIDE_VOTES, np.float32)
@@ -412,7 +413,7 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
     fronts: list[np.ndarray | None] = [None] * n
     for r in range(opts.rounds):
         weights = vote_weights(views, backgrounds, floors, fixed, opts, unexplained)
-        volume = carve(masks, views, points, index, opts.hull_resolution, weights, run_views)
+        volume = carve(masks, pixels, index, opts.hull_resolution, weights, run_views)
         votes = carve_votes(opts, n)
         core_votes = core_carve_votes(opts, n)
         core_max = None if core_votes is None else core_votes - 0.5

@@ -86,7 +86,7 @@ from ..layout import (
     stage_dir,
 )
 from ..log import progress
-from ..masking.hull import carve, carve_votes, hull_grid, reproject
+from ..masking.hull import carve, carve_votes, hull_grid, reproject, voxel_pixels
 from ..masking.parallel import view_workers
 from ..masking.prior import (
     PriorSphere,
@@ -241,7 +241,7 @@ def run_masks(
 
         # The hull of the final masks: the views' agreement and the object's bounding sphere.
         points, index = hull_grid(opts.hull_resolution, plane)
-        votes = carve(final, views, points, index, opts.hull_resolution, run_views=run_views)
+        votes = carve(final, voxel_pixels(points, views, run_views), index, opts.hull_resolution, run_views=run_views)
         hull_task = bar.add_task("hull", total=len(views))
         hulls = []
         for v in views:

@@ -13,7 +13,16 @@ import pytest
 from pipeline.cameras import look_at
 from pipeline.masking.colour import colour_log_odds, release_room_colours
 from pipeline.masking.grabcut import grabcut, hull_seeds
-from pipeline.masking.hull import carve, carve_votes, core_carve_votes, hull_depth, hull_grid, in_hull, reproject
+from pipeline.masking.hull import (
+    carve,
+    carve_votes,
+    core_carve_votes,
+    hull_depth,
+    hull_grid,
+    in_hull,
+    reproject,
+    voxel_pixels,
+)
 from pipeline.masking.parallel import view_workers
 from pipeline.masking.prior import PriorSphere, find_prior_sphere, in_sphere_frame, outgrown
 from pipeline.masking.segment import (
@@ -87,13 +96,27 @@ def test_plane_homography_maps_a_point_of_the_plane_between_views():
     np.testing.assert_allclose(q[:2] / q[2] + 0.5, ub, atol=1e-9)
 
 
+def test_voxel_pixels_are_each_points_pixel_in_each_view_or_none():
+    """A point lands on the pixel it projects into in every view; behind a camera, or off its image, on none (-1);
+    views grouped for workers come back in their order."""
+    views = ring_views(10)
+    eye, right, forward = views[0].c2w[:3, 3], views[0].c2w[:3, 0], views[0].c2w[:3, 2]
+    points = np.array([[0.1, -0.2, 0.05], eye - 0.5 * forward, eye + forward + 10.0 * right], np.float32)
+    pixels = voxel_pixels(points, views)
+    assert len(pixels) == len(views) and all(p.dtype == np.int32 and p.shape == (3,) for p in pixels)
+    for v, p in zip(views, pixels):
+        x, y = np.floor(project(v, points[0].astype(float))).astype(int)
+        assert p[0] == y * v.shape[1] + x
+    assert pixels[0][1] == -1 and pixels[0][2] == -1
+
+
 def test_the_hull_of_exact_sphere_masks_reprojects_to_them():
     """A sphere of radius 0.6 at the origin: its exact silhouettes carve a hull whose reprojection is the
     silhouette again, to about a pixel (24 views around, two rings)."""
     views = ring_views(12) + ring_views(12, elevation_deg=50.0)
     masks = [sphere_distance(v, radius=0.6) < 1.0 for v in views]
     points, index = hull_grid(64, None)
-    votes = carve(masks, views, points, index, 64)
+    votes = carve(masks, voxel_pixels(points, views), index, 64)
     for v, m in zip(views, masks):
         assert iou(reproject(votes, v, 0.5), m) > 0.93
     hull_sphere = [sphere_distance(v, radius=1.0) < 1.0 for v in views]
@@ -186,8 +209,9 @@ def test_doubtful_background_votes_count_less():
         lost.append(m & ~bottom)
         doubtful.append(bottom)
     points, index = hull_grid(64, None)
-    full = carve(lost, views, points, index, 64)
-    weighted = carve(lost, views, points, index, 64, [np.where(d, 0.1, 1.0).astype(np.float32) for d in doubtful])
+    pixels = voxel_pixels(points, views)
+    full = carve(lost, pixels, index, 64)
+    weighted = carve(lost, pixels, index, 64, [np.where(d, 0.1, 1.0).astype(np.float32) for d in doubtful])
     for v, m in zip(views[::6], truth[::6]):
         assert iou(reproject(full, v, 4.5), m) < 0.85
         assert iou(reproject(weighted, v, 4.5), m) > 0.9
@@ -236,7 +260,7 @@ def test_pixels_no_background_explains_keep_a_mirror_neck_that_colour_loses_in_e
         unexplained = unexplained_pixels(views, evidence, opts)
         assert (unexplained is not None) == kept
         weights = vote_weights(views, evidence.backgrounds, evidence.floors, {}, opts, unexplained)
-        volume = carve(evidence.masks, views, points, index, 64, weights)
+        volume = carve(evidence.masks, voxel_pixels(points, views), index, 64, weights)
         for v, truth, neck in zip(views[::6], truths[::6], necks[::6]):
             hull = reproject(volume, v, 4.5)
             neck_kept = np.count_nonzero(hull & neck) / np.count_nonzero(neck)
@@ -717,7 +741,7 @@ def test_a_wedge_few_views_see_past_is_in_the_hull_but_not_in_the_core_that_grab
         balls.append(ball)
         wedges.append(wedge)
     points, index = hull_grid(64, None)
-    volume = carve(masks, views, points, index, 64)
+    volume = carve(masks, voxel_pixels(points, views), index, 64)
     opts = SegmentOptions()
     votes, core_votes = carve_votes(opts, len(views)), core_carve_votes(opts, len(views))
     assert core_votes < 7 < votes
