@@ -3,7 +3,7 @@
 today's defaults and under a variant, pixel by pixel, in minutes instead of a masks run per setting.
 
     python bench/sweep_evidence.py /tmp/fe/random-1 /tmp/bt/results --radius 1 --radius 2.25 \\
-        --variant '{"sweep_near": 0.25}' --every 5
+        --variant '{"sweep_near": 0.5}' --every 5
 
 Each folder is a front end's results (decode/ and poses/, from ``bench/front_end.py --work`` or
 ``bench/blowtorch.py --work``); ``--radius`` per folder: the sphere the masks stage ran in (its

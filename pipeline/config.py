@@ -429,10 +429,11 @@ class MasksConfig(StrictModel):
         "farthest neighbour: the sweep's time goes as its inverse"
     )
     sweep_near: float = Field(
-        0.5, gt=0, lt=1, description="the depth sweep starts this far from the camera (a share of its distance from "
-        "the object's centre): a prop nearer the camera gives no evidence there. Half the planes lie between a "
-        "quarter and a half of the distance; on the synthetic family and the blowtorch they changed at most 4 of "
-        "15,000-74,000 swept pixels per capture (bench/results/masks_sweep_near.json)"
+        0.25, gt=0, lt=1, description="the depth sweep starts this far from the camera (a share of its distance "
+        "from the object's centre): a prop nearer the camera gives no evidence there. From 0.25, half the planes lie "
+        "nearer than half the distance and change at most 4 of 15,000-74,000 swept pixels per capture, but starting "
+        "at 0.5 moves the other planes a fraction of a pixel and lowered the synthetic suite's figures a little "
+        "(bench/results/masks_sweep_near.json)"
     )
     texture_threshold: float = Field(
         0.05, ge=0, description="the depth sweep counts only patches with at least this sRGB standard deviation "

@@ -107,7 +107,7 @@ class SegmentOptions:
     sweep_step_px: float = 1.0
     texture_threshold: float = 0.05
     occluder_reach_px: int = 6
-    sweep_near: float = 0.5
+    sweep_near: float = 0.25
     sweep_far: float = 4.0
     seed_radius: float = 0.3
     doubtful_vote: float = 0.5
