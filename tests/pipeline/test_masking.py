@@ -254,13 +254,14 @@ def test_pixels_no_background_explains_keep_a_mirror_neck_that_colour_loses_in_e
     for v in views:
         v.image[:] = 128
     points, index = hull_grid(64, None)
+    pixels = voxel_pixels(points, views)
     opts = SegmentOptions(unexplained_vote=0.0, unexplained_max_rate=0.3)
     for rate, kept in ((0.1, True), (0.6, False)):
         evidence, truths, necks = evidence_of_a_mirror_neck(views, rate)
         unexplained = unexplained_pixels(views, evidence, opts)
         assert (unexplained is not None) == kept
         weights = vote_weights(views, evidence.backgrounds, evidence.floors, {}, opts, unexplained)
-        volume = carve(evidence.masks, voxel_pixels(points, views), index, 64, weights)
+        volume = carve(evidence.masks, pixels, index, 64, weights)
         for v, truth, neck in zip(views[::6], truths[::6], necks[::6]):
             hull = reproject(volume, v, 4.5)
             neck_kept = np.count_nonzero(hull & neck) / np.count_nonzero(neck)
