@@ -2,7 +2,7 @@
 (what auto-exposure and auto white balance do, and what EXIF does not record), trained beside the originals.
 
     python bench/phone_photos.py                         # 24 photos at 265x177, fast preset, 600 iterations
-    python bench/phone_photos.py --photos 16 --downscale 4 --set train.iterations=1500
+    python bench/phone_photos.py --photos 16 --downscale 4 --iterations 1500 --no-held-out
 
 Both captures get the photographers' cameras (poses_bounds.npy, as known cameras) and their object masks (as
 user masks), so only the photos' appearance differs. Each goes through ``orca decode``, ``poses``, ``masks``,
@@ -85,8 +85,10 @@ def build_capture(folder: Path, photos: Sequence[Path], downscale: int, gains: n
     return folder
 
 
-def run_capture(capture: Path, results: Path, overrides: Sequence[str] = ()) -> dict[str, float]:
-    """decode -> poses -> masks -> train -> evaluate --held-out into ``results/<stage>``; seconds per stage.
+def run_capture(capture: Path, results: Path, overrides: Sequence[str] = (), held_out: bool = True
+                ) -> dict[str, float]:
+    """decode -> poses -> masks -> train (-> evaluate --held-out unless ``held_out`` is off) into
+    ``results/<stage>``; seconds per stage.
 
     Raises:
         RuntimeError: a stage failed (its log's tail in the message).
@@ -101,6 +103,8 @@ def run_capture(capture: Path, results: Path, overrides: Sequence[str] = ()) -> 
                   r["masks"] / "masks", "--capture", capture, "--preset", "fast", "--out", r["train"], *sets],
         "evaluate": ["evaluate", r["train"], "--held-out", "--out", r["evaluate"], "--device", "cpu"],
     }
+    if not held_out:
+        del commands["evaluate"]
     seconds = {}
     results.mkdir(parents=True, exist_ok=True)
     for stage, args in commands.items():
@@ -125,8 +129,9 @@ def held_out_means(results: Path) -> dict[str, float]:
     return json.loads((results / "evaluate" / "evaluate.json").read_text(encoding="utf-8"))["held_out"]["mean"]
 
 
-def compare(original: Path, phone: Path, applied: dict[str, np.ndarray]) -> dict[str, Any]:
-    """The figures of the module doc from the two runs' result folders and the gains applied per photo name."""
+def compare(original: Path, phone: Path, applied: dict[str, np.ndarray], held_out: bool = True) -> dict[str, Any]:
+    """The figures of the module doc from the two runs' result folders and the gains applied per photo name (the
+    gains' alone without ``held_out``)."""
     base, learned = learned_gains(original), learned_gains(phone)
     names = sorted(learned)
     recovered = np.stack([learned[n] / base[n] for n in names])
@@ -135,29 +140,31 @@ def compare(original: Path, phone: Path, applied: dict[str, np.ndarray]) -> dict
     truth /= np.exp(np.log(truth).mean(axis=0))
     error = np.abs(recovered / truth - 1)
     applied_stops, recovered_stops = np.log2(truth).mean(axis=1), np.log2(recovered).mean(axis=1)
-    before, after = held_out_means(original), held_out_means(phone)
-    keys = ("psnr_srgb_object_matched", "psnr_srgb_frame_matched", "psnr_srgb_object", "psnr_srgb_frame")
-    return {
+    figures = {
         "gain_error_median": float(np.median(error)), "gain_error_max": float(error.max()),
         "applied_stops_range": float(np.ptp(applied_stops)),
         "exposure_explained": float(1 - np.var(applied_stops - recovered_stops) / np.var(applied_stops)),
-        "held_out_original": {k: before[k] for k in keys}, "held_out_phone": {k: after[k] for k in keys},
-        "held_out_drop_db": {k: before[k] - after[k] for k in keys},
         "per_photo": {n: {"applied": truth[i].round(4).tolist(), "recovered": recovered[i].round(4).tolist()}
                       for i, n in enumerate(names)},
     }
+    if held_out:
+        before, after = held_out_means(original), held_out_means(phone)
+        keys = ("psnr_srgb_object_matched", "psnr_srgb_frame_matched", "psnr_srgb_object", "psnr_srgb_frame")
+        figures |= {"held_out_original": {k: before[k] for k in keys}, "held_out_phone": {k: after[k] for k in keys},
+                    "held_out_drop_db": {k: before[k] - after[k] for k in keys}}
+    return figures
 
 
-def run(work: Path, photos: Sequence[Path], downscale: int, overrides: Sequence[str] = (), seed: int = 0
-        ) -> dict[str, Any]:
+def run(work: Path, photos: Sequence[Path], downscale: int, overrides: Sequence[str] = (), seed: int = 0,
+        held_out: bool = True) -> dict[str, Any]:
     """Both captures built in ``work`` and run; :func:`compare`'s figures and the seconds per stage."""
     gains = phone_gains(len(photos), seed)
     original = build_capture(work / "original", photos, downscale)
     phone = build_capture(work / "phone", photos, downscale, gains)
-    seconds = {"original": run_capture(original, work / "results_original", overrides),
-               "phone": run_capture(phone, work / "results_phone", overrides)}
+    seconds = {"original": run_capture(original, work / "results_original", overrides, held_out),
+               "phone": run_capture(phone, work / "results_phone", overrides, held_out)}
     applied = {p.stem: gains[i] for i, p in enumerate(photos)}
-    return {**compare(work / "results_original", work / "results_phone", applied), "seconds": seconds}
+    return {**compare(work / "results_original", work / "results_phone", applied, held_out), "seconds": seconds}
 
 
 def main() -> None:
@@ -167,12 +174,15 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0, help="of the applied gains")
     parser.add_argument("--set", dest="overrides", action="append", default=[], help="train config overrides")
     parser.add_argument("--work", type=Path, default=None, help="work folder (default: a temporary one)")
+    parser.add_argument("--no-held-out", dest="held_out", action="store_false",
+                        help="the gains alone: no orca evaluate --held-out (the held-out figures are left out)")
+    parser.add_argument("--iterations", type=int, default=600, help="train.iterations")
     args = parser.parse_args()
     every = max(len(select_photos(DATASET)) // args.photos, 1)
     photos = select_photos(DATASET, every=every, limit=args.photos)
-    overrides = ["train.iterations=600", *args.overrides]
+    overrides = [f"train.iterations={args.iterations}", *args.overrides]
     work = args.work or Path(tempfile.mkdtemp(prefix="phone_photos_"))
-    figures = run(work, photos, args.downscale, overrides, args.seed)
+    figures = run(work, photos, args.downscale, overrides, args.seed, args.held_out)
     print(json.dumps({k: v for k, v in figures.items() if k != "per_photo"}, indent=1))
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     with open(RESULTS, "a", encoding="utf-8") as f:

@@ -1,8 +1,15 @@
-"""Shared fixtures: a tiny synthetic capture (rendered once per session) and its decode."""
+"""Shared fixtures: a tiny synthetic capture (rendered once per session) and its decode, the SfM captures.
+
+The suite runs in pytest-xdist workers (scripts/test.sh): a session fixture that renders or runs SfM is made once
+per test run by :func:`_once` and shared by the workers, not made again in each."""
 
 from __future__ import annotations
 
 import os
+import pickle
+import tempfile
+from collections.abc import Callable
+from typing import TypeVar
 
 # LibRaw (rawpy) and torch each bring an OpenMP runtime; with the default spin-waiting, the two fight over
 # the cores once both are loaded in one process (a torch test ran 3x slower after the decode tests).
@@ -11,6 +18,25 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 from pathlib import Path  # noqa: E402
 
 import pytest  # noqa: E402
+
+T = TypeVar("T")
+
+
+def _once(tmp_path_factory, name: str, make: Callable[[Path], T]) -> T:
+    """``make(folder)``'s value (picklable, e.g. a path), made once per test run in a new folder: under
+    pytest-xdist the first worker to ask makes it, holding a lock in the run's base folder, and the others read
+    what it made. ``make`` must leave the folder as it was made: tests that change it work on a copy."""
+    if "PYTEST_XDIST_WORKER" not in os.environ:
+        return make(tmp_path_factory.mktemp(name))
+    from filelock import FileLock
+
+    base = tmp_path_factory.getbasetemp().parent  # the run's folder, above each worker's own
+    value = base / f"{name}.pickle"
+    with FileLock(base / f"{name}.lock"):
+        if not value.is_file():  # a worker whose make() failed wrote nothing: the next one tries again
+            made = make(Path(tempfile.mkdtemp(prefix=f"{name}-", dir=base)))
+            value.write_bytes(pickle.dumps(made))
+        return pickle.loads(value.read_bytes())
 
 
 @pytest.fixture(scope="session")
@@ -22,7 +48,8 @@ def tiny_capture(tmp_path_factory) -> Path:
     from pipeline.synth import SCENES, SynthOptions, render_capture
 
     options = SynthOptions(views=4, width=48, height=36, spp=16, env_size=16, coverage_spp=9, seed=1)
-    return render_capture(small(SCENES["sphere"]), tmp_path_factory.mktemp("tiny") / "sphere", options)
+    scene = small(SCENES["sphere"])
+    return _once(tmp_path_factory, "tiny_capture", lambda folder: render_capture(scene, folder / "sphere", options))
 
 
 @pytest.fixture(scope="session")
@@ -30,9 +57,8 @@ def tiny_decode(tiny_capture, tmp_path_factory) -> Path:
     from pipeline.config import DecodeConfig
     from pipeline.stages.decode import run_decode
 
-    out = tmp_path_factory.mktemp("tiny_results") / "decode"
-    run_decode(tiny_capture, out, DecodeConfig())
-    return out
+    return _once(tmp_path_factory, "tiny_decode",
+                 lambda folder: run_decode(tiny_capture, folder / "decode", DecodeConfig()).out_dir)
 
 
 # The DAG's tiny settings, logged at every step, with a coarser hull and mesh.
@@ -42,6 +68,10 @@ TINY_RESULTS = ["train.logging.log_every=1", "train.logging.preview_every=2", "t
 
 @pytest.fixture(scope="session")
 def tiny_results(tiny_capture, tmp_path_factory) -> Path:
+    return _once(tmp_path_factory, "tiny_results", lambda folder: _tiny_results(tiny_capture, folder))
+
+
+def _tiny_results(tiny_capture: Path, folder: Path) -> Path:
     """``results/tiny/`` with every stage's folder but the report's, made by the stages themselves through the
     `orca` CLI: decode, poses (the capture's known cameras), masks (its own masks), a few training steps, mesh,
     export and evaluate (~15 s). Tests that change it work on a copy."""
@@ -51,11 +81,11 @@ def tiny_results(tiny_capture, tmp_path_factory) -> Path:
 
     from pipeline.cli import main
 
-    capture = tmp_path_factory.mktemp("results_capture") / "tiny"
+    capture = folder / "captures" / "tiny"
     shutil.copytree(tiny_capture, capture)
     shutil.copy(capture / "ground_truth" / "cameras.json", capture / "cameras.json")
     shutil.copytree(capture / "ground_truth" / "masks", capture / "masks")
-    out = tmp_path_factory.mktemp("results") / "tiny"
+    out = folder / "results" / "tiny"
     sets = [a for s in [*TINY_DAG, *TINY_RESULTS] for a in ("--set", s)]
     cams = str(out / "masks" / "cameras.json")
     for argv in (
@@ -95,16 +125,16 @@ def _sfm_capture(tmp_path_factory, scene: str, views: int, spp: int, seed: int) 
 
     options = SynthOptions(views=views, width=320, height=240, spp=spp, format="jpg", env_size=16, coverage_spp=4,
                            seed=seed)
-    return render_capture(SCENES[scene], tmp_path_factory.mktemp(f"sfm_{scene}") / scene, options)
+    return _once(tmp_path_factory, f"sfm_{scene}",
+                 lambda folder: render_capture(SCENES[scene], folder / scene, options))
 
 
 def _decode(capture: Path, tmp_path_factory) -> Path:
     from pipeline.config import DecodeConfig
     from pipeline.stages.decode import run_decode
 
-    out = tmp_path_factory.mktemp(f"{capture.name}_results") / "decode"
-    run_decode(capture, out, DecodeConfig())
-    return out
+    return _once(tmp_path_factory, f"{capture.name}_decode",
+                 lambda folder: run_decode(capture, folder / "decode", DecodeConfig()).out_dir)
 
 
 @pytest.fixture(scope="session")
@@ -126,10 +156,12 @@ def sfm_sphere_poses(sfm_sphere_capture, sfm_sphere_decode, tmp_path_factory):
     from pipeline.config import PosesConfig
     from pipeline.stages.poses import run_poses
 
-    out = tmp_path_factory.mktemp("sfm_sphere_poses") / "poses"
-    started = time.time()
-    result = run_poses(sfm_sphere_capture, sfm_sphere_decode, out, PosesConfig(num_threads=2))
-    return result, out, time.time() - started
+    def poses(folder: Path):
+        started = time.time()
+        result = run_poses(sfm_sphere_capture, sfm_sphere_decode, folder / "poses", PosesConfig(num_threads=2))
+        return result, folder / "poses", time.time() - started
+
+    return _once(tmp_path_factory, "sfm_sphere_poses", poses)
 
 
 @pytest.fixture(scope="session")
