@@ -3,6 +3,7 @@
 
     python bench/phone_photos.py                         # 24 photos at 265x177, fast preset, 600 iterations
     python bench/phone_photos.py --photos 16 --downscale 4 --iterations 1500 --no-held-out
+    python bench/phone_photos.py --paired --photos 8 --downscale 16 --iterations 300   # the test's check
 
 Both captures get the photographers' cameras (poses_bounds.npy, as known cameras) and their object masks (as
 user masks), so only the photos' appearance differs. Each goes through ``orca decode``, ``poses``, ``masks``,
@@ -15,8 +16,10 @@ user masks), so only the photos' appearance differs. Each goes through ``orca de
 - held-out PSNR on the object and the whole frame with each held-out photo's gains matched (the held-out photos
   are re-encoded too, and no model can know their exposure), re-encoded minus original.
 
-Prints them and appends a JSON line to bench/results/phone_photos.jsonl. tests/stages/test_blowtorch.py runs the
-same functions on fewer, smaller photos.
+``--paired`` trains one capture instead, holding each photo twice (as shot and re-encoded, the same camera and
+mask), and measures the gains of each re-encoded photo over its original's: the gains' check for one training
+(tests/stages/test_phone_photos.py), easier than the realistic run, where the two appearances are never seen side by
+side. Prints the figures and appends a JSON line to bench/results/phone_photos.jsonl.
 """
 
 from __future__ import annotations
@@ -46,6 +49,7 @@ TINT = 0.15  # red and blue gains within exp(+-0.15) of green: daylight vs. tung
 JPEG_QUALITY = 92  # a phone's
 HOLDOUT_EVERY = 4
 TRAIN = (f"train.holdout_every={HOLDOUT_EVERY}", "train.device=cpu")
+PAIRED_SUFFIX = "_phone"  # the re-encoded copy's name in a paired capture: <stem>_phone.jpg
 
 
 def phone_gains(count: int, seed: int = 0, stops: float = STOPS, tint: float = TINT) -> np.ndarray:
@@ -129,30 +133,70 @@ def held_out_means(results: Path) -> dict[str, float]:
     return json.loads((results / "evaluate" / "evaluate.json").read_text(encoding="utf-8"))["held_out"]["mean"]
 
 
+def gain_recovery(recovered: dict[str, np.ndarray], applied: dict[str, np.ndarray]) -> dict[str, Any]:
+    """How well ``recovered`` gains ``(3,)`` per photo name match the ``applied`` ones, both relative to their
+    geometric mean over the photos: the gain figures of the module doc."""
+    names = sorted(recovered)
+    found = np.stack([recovered[n] for n in names])
+    found /= np.exp(np.log(found).mean(axis=0))
+    truth = np.stack([applied[n] for n in names])
+    truth /= np.exp(np.log(truth).mean(axis=0))
+    error = np.abs(found / truth - 1)
+    applied_stops, recovered_stops = np.log2(truth).mean(axis=1), np.log2(found).mean(axis=1)
+    return {
+        "gain_error_median": float(np.median(error)), "gain_error_max": float(error.max()),
+        "applied_stops_range": float(np.ptp(applied_stops)),
+        "exposure_explained": float(1 - np.var(applied_stops - recovered_stops) / np.var(applied_stops)),
+        "per_photo": {n: {"applied": truth[i].round(4).tolist(), "recovered": found[i].round(4).tolist()}
+                      for i, n in enumerate(names)},
+    }
+
+
 def compare(original: Path, phone: Path, applied: dict[str, np.ndarray], held_out: bool = True) -> dict[str, Any]:
     """The figures of the module doc from the two runs' result folders and the gains applied per photo name (the
     gains' alone without ``held_out``)."""
     base, learned = learned_gains(original), learned_gains(phone)
-    names = sorted(learned)
-    recovered = np.stack([learned[n] / base[n] for n in names])
-    recovered /= np.exp(np.log(recovered).mean(axis=0))
-    truth = np.stack([applied[n] for n in names])
-    truth /= np.exp(np.log(truth).mean(axis=0))
-    error = np.abs(recovered / truth - 1)
-    applied_stops, recovered_stops = np.log2(truth).mean(axis=1), np.log2(recovered).mean(axis=1)
-    figures = {
-        "gain_error_median": float(np.median(error)), "gain_error_max": float(error.max()),
-        "applied_stops_range": float(np.ptp(applied_stops)),
-        "exposure_explained": float(1 - np.var(applied_stops - recovered_stops) / np.var(applied_stops)),
-        "per_photo": {n: {"applied": truth[i].round(4).tolist(), "recovered": recovered[i].round(4).tolist()}
-                      for i, n in enumerate(names)},
-    }
+    figures = gain_recovery({n: learned[n] / base[n] for n in learned}, applied)
     if held_out:
         before, after = held_out_means(original), held_out_means(phone)
         keys = ("psnr_srgb_object_matched", "psnr_srgb_frame_matched", "psnr_srgb_object", "psnr_srgb_frame")
         figures |= {"held_out_original": {k: before[k] for k in keys}, "held_out_phone": {k: after[k] for k in keys},
                     "held_out_drop_db": {k: before[k] - after[k] for k in keys}}
     return figures
+
+
+def build_paired_capture(folder: Path, photos: Sequence[Path], downscale: int, gains: np.ndarray,
+                         dataset: Path = DATASET) -> Path:
+    """One capture holding each of ``photos`` twice: as shot and re-encoded with its ``gains`` (``(len(photos),
+    3)``; named ``<stem>{PAIRED_SUFFIX}.jpg``), both with the dataset's camera (LLFF rows written for both names)
+    and object mask. One training then sees every view in both appearances, and the learned gains' ratio within
+    each pair is the recovered re-encoding: the gains' check at the cost of one training."""
+    (folder / PHOTO_SUBDIR).mkdir(parents=True)
+    (folder / USER_MASKS).mkdir()
+    listed = (dataset / LLFF_IMAGE_NAMES).read_text(encoding="utf-8").split()
+    rows = dict(zip(sorted(listed), np.load(dataset / POSES_BOUNDS)))
+    names, poses = [], {}
+    for p, g in zip(photos, gains):
+        copy = folder / PHOTO_SUBDIR / f"{p.stem}{PAIRED_SUFFIX}.jpg"
+        (folder / PHOTO_SUBDIR / p.name).symlink_to(p.resolve())
+        reencode(p, copy, g)
+        for photo in (p, copy):
+            (folder / USER_MASKS / f"{photo.stem}.png").symlink_to((dataset / USER_MASKS / f"{p.stem}.png").resolve())
+            names.append(photo.name)
+            poses[photo.name] = rows[p.name]
+    names.sort()
+    (folder / LLFF_IMAGE_NAMES).write_text("\n".join(names) + "\n", encoding="utf-8")
+    np.save(folder / POSES_BOUNDS, np.stack([poses[n] for n in names]))
+    (folder / CAPTURE_YAML).write_text(f"decode:\n  downscale: {downscale}\n", encoding="utf-8")
+    return folder
+
+
+def paired_recovery(results: Path, applied: dict[str, np.ndarray]) -> dict[str, Any]:
+    """:func:`gain_recovery` of a :func:`build_paired_capture` run: each re-encoded photo's learned gains over its
+    original's."""
+    learned = learned_gains(results)
+    recovered = {n: learned[f"{n}{PAIRED_SUFFIX}"] / learned[n] for n in learned if not n.endswith(PAIRED_SUFFIX)}
+    return gain_recovery(recovered, applied)
 
 
 def run(work: Path, photos: Sequence[Path], downscale: int, overrides: Sequence[str] = (), seed: int = 0,
@@ -167,6 +211,17 @@ def run(work: Path, photos: Sequence[Path], downscale: int, overrides: Sequence[
     return {**compare(work / "results_original", work / "results_phone", applied, held_out), "seconds": seconds}
 
 
+def run_paired(work: Path, photos: Sequence[Path], downscale: int, overrides: Sequence[str] = (), seed: int = 0
+               ) -> dict[str, Any]:
+    """:func:`build_paired_capture` in ``work``, trained on every photo; :func:`paired_recovery`'s figures and the
+    seconds per stage."""
+    gains = phone_gains(len(photos), seed)
+    capture = build_paired_capture(work / "paired", photos, downscale, gains)
+    seconds = run_capture(capture, work / "results_paired", [*overrides, "train.holdout_every=0"], held_out=False)
+    applied = {p.stem: g for p, g in zip(photos, gains)}
+    return {**paired_recovery(work / "results_paired", applied), "seconds": seconds}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--photos", type=int, default=24, help="how many photos (evenly over the walk-around)")
@@ -177,16 +232,21 @@ def main() -> None:
     parser.add_argument("--no-held-out", dest="held_out", action="store_false",
                         help="the gains alone: no orca evaluate --held-out (the held-out figures are left out)")
     parser.add_argument("--iterations", type=int, default=600, help="train.iterations")
+    parser.add_argument("--paired", action="store_true",
+                        help="one capture with each photo as shot and re-encoded, one training (the test's check)")
     args = parser.parse_args()
     every = max(len(select_photos(DATASET)) // args.photos, 1)
     photos = select_photos(DATASET, every=every, limit=args.photos)
     overrides = [f"train.iterations={args.iterations}", *args.overrides]
     work = args.work or Path(tempfile.mkdtemp(prefix="phone_photos_"))
-    figures = run(work, photos, args.downscale, overrides, args.seed, args.held_out)
+    if args.paired:
+        figures = run_paired(work, photos, args.downscale, overrides, args.seed)
+    else:
+        figures = run(work, photos, args.downscale, overrides, args.seed, args.held_out)
     print(json.dumps({k: v for k, v in figures.items() if k != "per_photo"}, indent=1))
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     with open(RESULTS, "a", encoding="utf-8") as f:
-        f.write(json.dumps({"machine": machine(), "commit": commit(), "photos": len(photos),
+        f.write(json.dumps({"machine": machine(), "commit": commit(), "photos": len(photos), "paired": args.paired,
                             "downscale": args.downscale, "seed": args.seed, "overrides": overrides, **figures}) + "\n")
 
 
