@@ -8,6 +8,7 @@ from __future__ import annotations
 import os
 import pickle
 import tempfile
+from collections import Counter
 from collections.abc import Callable
 from typing import TypeVar
 
@@ -20,6 +21,17 @@ from pathlib import Path  # noqa: E402
 import pytest  # noqa: E402
 
 T = TypeVar("T")
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The test files with the longest runs first, by the seconds of their tests' ``slow(seconds=...)`` marks:
+    pytest-xdist hands each worker a whole file as it frees up (scripts/test.sh), so a long file begun last would
+    leave the other workers idle at the end."""
+    seconds: Counter = Counter()
+    for item in items:
+        mark = item.get_closest_marker("slow")
+        seconds[item.path] += mark.kwargs.get("seconds", 0) if mark else 0
+    items.sort(key=lambda item: -seconds[item.path])  # stable: each file's tests keep their order
 
 
 def _once(tmp_path_factory, name: str, make: Callable[[Path], T]) -> T:

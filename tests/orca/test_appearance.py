@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+import pytest
 import torch
 
 from orca.appearance import appearance_prior, apply_gains, photo_gains
@@ -41,6 +42,7 @@ def _rays(n: int, photos: int, gains: torch.Tensor, seed: int = 0) -> Batch:
                  photo)
 
 
+@pytest.mark.slow(seconds=60)
 def test_training_recovers_each_photos_exposure_and_white_balance():
     """Four photos a stop apart in exposure and with different tints: after training, the learned gains match
     the applied ones to a few percent, and the fit is closer than one appearance for all can be (the mean colour

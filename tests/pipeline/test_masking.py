@@ -974,6 +974,7 @@ def test_masks_made_again_that_still_leave_the_unexplained_pixels_beside_them_ar
     assert np.median([iou(m, t) for m, t in zip(seg.masks, truths)]) > 0.9
 
 
+@pytest.mark.slow(seconds=35)
 def test_worker_processes_make_the_same_masks_as_one_process():
     """Each view's sweeps, evidence against the hull and GrabCut run in worker processes and the carve's view
     groups are summed in a fixed order: the masks do not depend on how many processes made them."""

@@ -302,7 +302,7 @@ def tiles_capture(tmp_path_factory):
 RING_STEP_DEG = 360 / 32  # the tiled capture's step between photos
 
 
-@pytest.mark.slow
+@pytest.mark.slow(seconds=130)
 def test_tiled_room_poses_are_right_or_flagged(tiles_capture, tmp_path):
     from pipeline.alignment import compare_poses
     from pipeline.artifacts import read_json

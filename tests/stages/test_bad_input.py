@@ -454,6 +454,7 @@ def test_sigterm_checkpoints_train_with_points_and_a_rerun_resumes(tiny_capture,
     assert f"resuming from {ckpts[0]}" in caplog.text
 
 
+@pytest.mark.slow(seconds=40)
 def test_a_snakemake_run_sigtermed_during_train_resumes_on_rerun(tiny_capture, tmp_path):
     """Item 3: the tiny capture's DAG stopped during train the way Slurm's scancel stops a job (SIGTERM to each of
     its processes; Snakemake itself, sent SIGTERM alone, waits for its running jobs to finish), then rerun: the

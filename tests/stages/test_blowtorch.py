@@ -1,7 +1,7 @@
 """Real photos of a glossy object. The front end: the first 16 blowtorch photos (about 290 degrees of the
 walk-around) decoded at 530x353, through ``orca decode``, ``orca poses`` and ``orca masks`` as
 bench/blowtorch.py runs them, scored against the photographers' COLMAP poses and object masks; the masks alone on
-every third photo with the photographers' cameras. Training on phone-like photos: test_phone_photos.py."""
+every sixth photo with the photographers' cameras. Training on phone-like photos: test_phone_photos.py."""
 
 from __future__ import annotations
 
@@ -22,10 +22,10 @@ OVERRIDES = ["poses.num_threads=2"]
 ROTATION_DEG_MEDIAN, ROTATION_DEG_MAX = 0.5, 2.0
 CENTRE_MEDIAN_FRACTION, CENTRE_MAX_FRACTION = 0.02, 0.05  # of the cameras' mean distance from their centroid
 IOU_MEDIAN, IOU_WORST = 0.95, 0.90
-# Every third photo with the reference cameras: the sphere the masks ran in (the poses stage's is 1; the probes
+# Every sixth photo with the reference cameras: the sphere the masks ran in (the poses stage's is 1; the probes
 # stopped at 1.5 with the tips cut before the share of views touching its outline was lowered) and the masks'
-# floor under what was measured (0.811 / 0.719).
-SUBSET_SPHERE_MIN, SUBSET_IOU_MEDIAN, SUBSET_IOU_WORST = 1.5, 0.79, 0.69
+# floor, the one every third photo had (0.811 / 0.719 measured there, 0.836 / 0.750 here).
+SUBSET_EVERY, SUBSET_SPHERE_MIN, SUBSET_IOU_MEDIAN, SUBSET_IOU_WORST = 6, 1.5, 0.79, 0.69
 
 pytestmark = pytest.mark.skipif(not DATASET.is_dir(), reason="no blowtorch test data")
 
@@ -55,7 +55,7 @@ def test_reference_masks_follow_the_poses_stages_undistortion():
     assert iou(drawn, undistort_mask(drawn, maps, path.stem)) < iou(resampled, undistort_mask(drawn, maps, path.stem))
 
 
-@pytest.mark.slow
+@pytest.mark.slow(seconds=35)
 def test_the_cameras_that_register_agree_with_the_reference(tmp_path):
     """16 photos of the walk-around's highest ring (from _DSC1618) at 530x353: the photos that get a camera have
     the photographers' camera, within a fraction of a degree (a wrong pose reported as good is the failure that
@@ -74,15 +74,16 @@ def test_the_cameras_that_register_agree_with_the_reference(tmp_path):
     assert poses["center_max_fraction"] <= CENTRE_MAX_FRACTION
 
 
-@pytest.mark.slow
-def test_masks_of_every_third_photo_with_the_reference_cameras_keep_the_whole_object(tmp_path):
-    """23 photos (every third) at 530x353 with the photographers' cameras, through ``orca decode``, ``orca poses``
-    (the LLFF import) and ``orca masks``: the burner and the handle reach past the 1.5 sphere in only 5 views'
-    probes (they leave it towards the cameras), and the sphere must still grow to hold them. Measured 0.811 /
-    0.719 (median / worst view; 0.800 / 0.727 with the depth sweep's planes from half the distance, placed a
-    fraction of a pixel elsewhere); with the sphere stopped at 1.5, the tips cut in every view, 0.779. Below the
-    issue's 0.95 / 0.90: carpet between the handle and the tank, which 23 views carve less well, stays."""
-    photos = select_photos(DATASET, every=3)
+@pytest.mark.slow(seconds=230)
+def test_masks_of_every_sixth_photo_with_the_reference_cameras_keep_the_whole_object(tmp_path):
+    """12 photos (every sixth) at 530x353 with the photographers' cameras, through ``orca decode``, ``orca poses``
+    (the LLFF import) and ``orca masks``: the burner and the handle reach past the 1.5 sphere in only 3 views'
+    probes (they leave it towards the cameras), and the sphere must still grow to hold them (to 2.25). Measured
+    0.836 / 0.750 (median / worst view). Below the issue's 0.95 / 0.90: carpet between the handle and the tank,
+    which a few views carve less well, stays. Every third photo (``bench/blowtorch.py --known-poses --every 3
+    --downscale 4``, twice as long): 0.811 / 0.719; with the sphere stopped at 1.5, the tips cut in every view,
+    0.779."""
+    photos = select_photos(DATASET, every=SUBSET_EVERY)
     capture = build_capture(tmp_path / "blowtorch", photos, DOWNSCALE, known_poses=DATASET)
     runs = run_front_end(capture, tmp_path / "results", OVERRIDES)
     failed = [r for r in runs.values() if r.returncode]

@@ -72,7 +72,7 @@ def test_user_masks_of_every_encoding_override_on_the_tiny_capture(tiny_capture,
     assert all((tmp_path / "masks" / c.image).is_file() for c in cams.cameras)
 
 
-@pytest.mark.slow
+@pytest.mark.slow(seconds=85)
 def test_user_masks_larger_than_the_poses_stage_sphere_give_the_whole_object(sfm_sphere_capture, sfm_sphere_decode,
                                                                              tmp_path):
     """The poses stage's sphere is a guess (here from a framing window far smaller than the object): the user's
@@ -164,7 +164,7 @@ def automatic(capture: Path, decode: Path, tmp_path: Path, config: MasksConfig, 
     return result, scores, seconds
 
 
-@pytest.mark.slow
+@pytest.mark.slow(seconds=70)
 def test_automatic_masks_of_the_sphere_with_two_corrections(sfm_sphere_capture, sfm_sphere_decode, tmp_path):
     """20 views of the glossy sphere: automatic masks against the ground truth; two views get the user's
     masks (corrections), which are written as given."""

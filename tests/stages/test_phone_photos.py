@@ -23,7 +23,7 @@ GAIN_ERROR_MEDIAN, EXPOSURE_EXPLAINED = 0.10, 0.85
 pytestmark = pytest.mark.skipif(not DATASET.is_dir(), reason="no blowtorch test data")
 
 
-@pytest.mark.slow
+@pytest.mark.slow(seconds=300)
 def test_each_photos_exposure_and_white_balance_come_back_from_its_view_shot_twice(tmp_path):
     figures = run_paired(tmp_path, select_photos(DATASET, every=EVERY, limit=PHOTOS), DOWNSCALE, TRAIN)
     print({k: v for k, v in figures.items() if k != "per_photo"})

@@ -364,7 +364,7 @@ def test_object_points_dropped_adjust_the_cameras_on_the_surroundings_and_go_bac
     assert 0 < rotation.max() < 0.5, rotation
 
 
-@pytest.mark.slow
+@pytest.mark.slow(seconds=50)
 def test_torus_capture_registers_every_view_accurately(sfm_torus_capture, sfm_torus_decode, tmp_path):
     """The non-convex scene (rendered at 4 samples per pixel: noisier photos)."""
     result = run(sfm_torus_capture, sfm_torus_decode, tmp_path / "poses")
@@ -476,7 +476,7 @@ def test_a_calibration_fixes_the_intrinsics(sfm_sphere_capture, sfm_sphere_decod
 # ------------------------------------------------------------------------------------------ real photos
 
 
-@pytest.mark.slow
+@pytest.mark.slow(seconds=35)
 @pytest.mark.skipif(not FOUNTAIN.is_dir(), reason="../shared/testdata/sfm/fountain-P11 not present")
 def test_fountain_p11_real_photos(tmp_path):
     """Strecha's fountain-P11: 11 real photos; decoded at half size (768x512) to keep it ~20 s on 2 cores."""

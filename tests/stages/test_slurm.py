@@ -37,7 +37,7 @@ def slurm() -> Path:
         subprocess.run(["bash", str(SCRIPT), "stop"], capture_output=True, timeout=120, check=False)
 
 
-@pytest.mark.slow
+@pytest.mark.slow(seconds=190)
 def test_the_tiny_dag_runs_through_slurm(slurm, tiny_capture, tmp_path):
     capture = tmp_path / "captures" / "tiny"
     shutil.copytree(tiny_capture, capture)

@@ -10,6 +10,7 @@ import shutil
 import subprocess
 from pathlib import Path
 
+import pytest
 from helpers import TINY_DAG, snakemake_command
 
 
@@ -18,6 +19,7 @@ def snakemake(workdir: Path, *args: str, env: dict[str, str] | None = None) -> s
                           check=False, env=None if env is None else {**os.environ, **env})
 
 
+@pytest.mark.slow(seconds=70)
 def test_the_dag_runs_decode_train_evaluate_then_nothing(tiny_capture, tmp_path):
     (tmp_path / "captures").mkdir()
     shutil.copytree(tiny_capture, tmp_path / "captures" / "tiny")

@@ -308,6 +308,7 @@ def held_out_losses(model, capture, decode, cfg) -> dict[str, float]:
     return {k: float(v) for k, v in terms.items()}
 
 
+@pytest.mark.slow(seconds=150)
 def test_a_minute_of_training_learns_the_blobs_shape_and_lowers_the_loss(blob, tmp_path):
     from orca.model import OrcaModel
 
@@ -354,6 +355,7 @@ def zero_set_iou(model, data) -> float:
     return float(np.mean(ious))
 
 
+@pytest.mark.slow(seconds=85)
 def test_the_visual_hull_start_has_the_blobs_silhouettes_before_any_step(blob):
     """train.sdf.init=hull: before any step the SDF fitted to the masks' visual hull has the silhouettes and far
     better normals than the sphere start."""
