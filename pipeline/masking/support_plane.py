@@ -180,8 +180,13 @@ def find_support_plane(views: Sequence[View], nbrs: Sequence[Sequence[int]], opt
     wide, and the cameras' up can be 10 degrees from it (a walk-around with more photos from one side): the start
     finds what a coarse search along the cameras' up misses."""
     up = camera_up(np.stack([v.c2w for v in views]))
-    pick = np.unique(np.linspace(0, len(views) - 1, min(samples, len(views))).round().astype(int))
-    regions = {int(i): sphere_distance(views[i]) >= 1.0 for i in pick}
+    spread_out = np.unique(np.linspace(0, len(views) - 1, min(samples, len(views))).round().astype(int))
+    regions = {int(i): sphere_distance(views[i]) >= 1.0 for i in spread_out}
+    # a view the sphere's image fills (an object filling the frame) shows no pixel around the object to explain
+    pick = [i for i in regions if regions[i].any()]
+    if not pick:
+        log.info("no support plane: the object's sphere fills the sampled views, leaving no pixels around it")
+        return None
 
     def score(normal: np.ndarray, offset: float) -> float:
         fractions = []
@@ -190,7 +195,7 @@ def find_support_plane(views: Sequence[View], nbrs: Sequence[Sequence[int]], opt
             for m in floor_measures(opts):
                 cost = floor_cost(views[i], [views[j] for j in nbrs[i]], normal, offset, opts, m)
                 explained |= cost < floor_thresholds(opts, m)[0]
-            fractions.append(float(explained[regions[int(i)]].mean()))
+            fractions.append(float(explained[regions[i]].mean()))
         return float(np.mean(fractions))
 
     def best_offset(normal: np.ndarray, offsets: np.ndarray) -> tuple[float, np.ndarray, float]:

@@ -486,16 +486,22 @@ def floor_views(gains: np.ndarray, normal: np.ndarray = FLOOR.normal) -> list[Vi
     """:func:`close_ring` over a textured floor 0.9 below the centre (z = -0.9, or with its own ``normal``), each
     view's photo scaled by its own ``gains`` row ``(N, 3)`` (exposure and white balance differing from photo to
     photo, as a camera's automatic ones do)."""
-    texture, views = cell_texture(7), close_ring(len(gains))
+    views = close_ring(len(gains))
+    for view, gain in zip(views, gains):
+        paint_floor(view, gain, normal)
+    return views
+
+
+def paint_floor(view: View, gain: np.ndarray, normal: np.ndarray = FLOOR.normal) -> None:
+    """``view``'s photo: :func:`floor_views`' textured floor, scaled by ``gain`` ``(3,)``."""
+    texture = cell_texture(7)
     a = np.cross(normal, [1.0, 0.0, 0.0])
     a /= np.linalg.norm(a)
     b = np.cross(normal, a)  # texture coordinates along the floor
-    for view, gain in zip(views, gains):
-        o, d = view.c2w[:3, 3], pixel_rays(view)
-        p = o + d * ((-0.9 - o @ normal) / (d @ normal))[..., None]
-        colour = 10 + 0.3 * texture(8 * (p @ a), 8 * (p @ b))  # a carpet's contrast; none clips at gains < 2.5
-        view.image = cv2.GaussianBlur(np.clip(colour * gain, 0, 255).astype(np.uint8), (0, 0), 0.7)
-    return views
+    o, d = view.c2w[:3, 3], pixel_rays(view)
+    p = o + d * ((-0.9 - o @ normal) / (d @ normal))[..., None]
+    colour = 10 + 0.3 * texture(8 * (p @ a), 8 * (p @ b))  # a carpet's contrast; none clips at gains < 2.5
+    view.image = cv2.GaussianBlur(np.clip(colour * gain, 0, 255).astype(np.uint8), (0, 0), 0.7)
 
 
 def test_zncc_cost_is_blind_to_gain_and_offset_and_no_evidence_on_flat_windows():
@@ -544,6 +550,18 @@ def test_the_floor_explains_photos_of_different_exposures_once_they_are_matched(
     assert plane is not None and abs(plane.offset + 0.9) < 0.03
     plane = find_support_plane(views, nbrs, SegmentOptions(floor_measure="zncc"))  # blind to exposure as it is
     assert plane is not None and abs(plane.offset + 0.9) < 0.03
+
+
+def test_a_view_the_sphere_fills_leaves_the_support_plane_to_the_others():
+    """An object filling the frame: one sampled view zoomed in until the unit sphere's image covers all of it has
+    no pixel around the object, and the floor the other views see is still found (not the deepest plane searched,
+    with a NaN share of pixels explained, as when that view's empty share entered the mean)."""
+    views = floor_views(np.ones((12, 3)))
+    views[0].K = np.array([[800.0, 0, 120], [0, 800.0, 90], [0, 0, 1]])
+    paint_floor(views[0], np.ones(3))
+    assert (sphere_distance(views[0]) < 1.0).all()
+    plane = find_support_plane(views, neighbours(views, 6, 60.0), SegmentOptions())
+    assert plane is not None and np.isfinite(plane.consistent_fraction) and abs(plane.offset + 0.9) < 0.03
 
 
 def test_the_support_plane_search_starts_from_the_sparse_points_plane_where_the_cameras_up_is_far_off():
