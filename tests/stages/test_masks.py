@@ -79,15 +79,16 @@ def test_user_masks_larger_than_the_poses_stage_sphere_give_the_whole_object(sfm
     masks reach past it, and the hull they are carved into must grow until it holds the whole object. The object's
     sphere is then the one found from the default guess (same re-normalized cameras) and the masks agree with it."""
     truth_dir = sfm_sphere_capture / "ground_truth" / "masks"
+    capture = tmp_path / "capture"  # the shared capture's files with its true cameras as known ones beside them
+    capture.mkdir()
+    for p in sfm_sphere_capture.iterdir():
+        (capture / p.name).symlink_to(p)
+    shutil.copy(sfm_sphere_capture / "ground_truth" / "cameras.json", capture / "cameras.json")
     spheres = {}
     for window in (None, 0.25):
-        shutil.copy(sfm_sphere_capture / "ground_truth" / "cameras.json", sfm_sphere_capture / "cameras.json")
         config = PosesConfig(use_masks=False) if window is None else PosesConfig(use_masks=False, object_window=window)
-        try:
-            run_poses(sfm_sphere_capture, sfm_sphere_decode, tmp_path / f"poses_{window}", config)
-        finally:
-            (sfm_sphere_capture / "cameras.json").unlink()
-        run_masks(sfm_sphere_capture, tmp_path / f"poses_{window}", tmp_path / f"masks_{window}", MasksConfig(),
+        run_poses(capture, sfm_sphere_decode, tmp_path / f"poses_{window}", config)
+        run_masks(capture, tmp_path / f"poses_{window}", tmp_path / f"masks_{window}", MasksConfig(),
                   user_masks_dir=truth_dir)
         out = load_masks(tmp_path / f"masks_{window}")
         assert out.report["agreement"]["median"] > 0.9, out.report["agreement"]
