@@ -167,27 +167,24 @@ def compare(original: Path, phone: Path, applied: dict[str, np.ndarray], held_ou
 
 def build_paired_capture(folder: Path, photos: Sequence[Path], downscale: int, gains: np.ndarray,
                          dataset: Path = DATASET) -> Path:
-    """One capture holding each of ``photos`` twice: as shot and re-encoded with its ``gains`` (``(len(photos),
-    3)``; named ``<stem>{PAIRED_SUFFIX}.jpg``), both with the dataset's camera (LLFF rows written for both names)
-    and object mask. One training then sees every view in both appearances, and the learned gains' ratio within
-    each pair is the recovered re-encoding: the gains' check at the cost of one training."""
-    (folder / PHOTO_SUBDIR).mkdir(parents=True)
-    (folder / USER_MASKS).mkdir()
+    """:func:`build_capture` of ``photos`` as shot, plus each re-encoded with its ``gains`` (``(len(photos), 3)``;
+    named ``<stem>{PAIRED_SUFFIX}.jpg``) with the same camera (the LLFF rows written for both names instead of the
+    dataset's linked in) and object mask. One training then sees every view in both appearances, and the learned
+    gains' ratio within each pair is the recovered re-encoding: the gains' check at the cost of one training."""
+    build_capture(folder, photos, downscale, dataset=dataset)
     listed = (dataset / LLFF_IMAGE_NAMES).read_text(encoding="utf-8").split()
     rows = dict(zip(sorted(listed), np.load(dataset / POSES_BOUNDS)))
-    names, poses = [], {}
+    poses = {p.name: rows[p.name] for p in photos}
     for p, g in zip(photos, gains):
         copy = folder / PHOTO_SUBDIR / f"{p.stem}{PAIRED_SUFFIX}.jpg"
-        (folder / PHOTO_SUBDIR / p.name).symlink_to(p.resolve())
         reencode(p, copy, g)
-        for photo in (p, copy):
-            (folder / USER_MASKS / f"{photo.stem}.png").symlink_to((dataset / USER_MASKS / f"{p.stem}.png").resolve())
-            names.append(photo.name)
-            poses[photo.name] = rows[p.name]
-    names.sort()
+        (folder / USER_MASKS / f"{copy.stem}.png").symlink_to((dataset / USER_MASKS / f"{p.stem}.png").resolve())
+        poses[copy.name] = rows[p.name]
+    names = sorted(poses)
+    for name in (POSES_BOUNDS, LLFF_IMAGE_NAMES):
+        (folder / name).unlink()  # build_capture's links to the dataset's rows
     (folder / LLFF_IMAGE_NAMES).write_text("\n".join(names) + "\n", encoding="utf-8")
     np.save(folder / POSES_BOUNDS, np.stack([poses[n] for n in names]))
-    (folder / CAPTURE_YAML).write_text(f"decode:\n  downscale: {downscale}\n", encoding="utf-8")
     return folder
 
 

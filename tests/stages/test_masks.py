@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 import pytest
 
+from bench.front_end import with_known_cameras
 from pipeline.artifacts import read_json
 from pipeline.cameras import load_cameras
 from pipeline.config import MasksConfig, PosesConfig
@@ -79,11 +80,7 @@ def test_user_masks_larger_than_the_poses_stage_sphere_give_the_whole_object(sfm
     masks reach past it, and the hull they are carved into must grow until it holds the whole object. The object's
     sphere is then the one found from the default guess (same re-normalized cameras) and the masks agree with it."""
     truth_dir = sfm_sphere_capture / "ground_truth" / "masks"
-    capture = tmp_path / "capture"  # the shared capture's files with its true cameras as known ones beside them
-    capture.mkdir()
-    for p in sfm_sphere_capture.iterdir():
-        (capture / p.name).symlink_to(p)
-    shutil.copy(sfm_sphere_capture / "ground_truth" / "cameras.json", capture / "cameras.json")
+    capture = with_known_cameras(sfm_sphere_capture, tmp_path / "capture")  # the shared capture stays as it is
     spheres = {}
     for window in (None, 0.25):
         config = PosesConfig(use_masks=False) if window is None else PosesConfig(use_masks=False, object_window=window)
