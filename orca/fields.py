@@ -58,6 +58,11 @@ class SDFFieldSpec:
     # photometric loss then drives the head deep into softplus' flat tail, where it stops learning.
     diffuse_init: float = 0.05
     bound: float = 1.0  # the SDF is modelled inside [-bound, bound]^3
+    # "tinted": the diffuse head also predicts each point's RGB reflectance at normal incidence (Schlick's F0):
+    # a metal's reflections take its colour and most of the light, which a clear coat's Fresnel (about 4 %,
+    # colourless) cannot give. "dielectric": no reflectance head; the renderer's exact Fresnel at its IOR.
+    reflectance: Literal["dielectric", "tinted"] = "dielectric"
+    reflectance_init: float = 0.04  # F0 at the start (a clear coat's at IOR 1.5: the dielectric's reflections)
 
 
 class SDFField(nn.Module):
@@ -77,10 +82,12 @@ class SDFField(nn.Module):
             self.net[-1].bias.zero_()
         self.texture_grid = HashGrid(spec.texture_grid) if spec.texture_grid is not None else None
         texture_dim = self.texture_grid.out_dim if self.texture_grid is not None else 0
-        self.diffuse_net = mlp(spec.feature_dim + 3 + texture_dim, spec.diffuse_hidden, spec.diffuse_layers, 3)
+        outputs = 6 if spec.reflectance == "tinted" else 3  # diffuse radiance, then F0's logits
+        self.diffuse_net = mlp(spec.feature_dim + 3 + texture_dim, spec.diffuse_hidden, spec.diffuse_layers, outputs)
         with torch.no_grad():
             self.diffuse_net[-1].weight.mul_(0.1)
-            self.diffuse_net[-1].bias.fill_(math.log(math.expm1(spec.diffuse_init)))  # softplus⁻¹
+            self.diffuse_net[-1].bias[:3].fill_(math.log(math.expm1(spec.diffuse_init)))  # softplus⁻¹
+            self.diffuse_net[-1].bias[3:].fill_(math.log(spec.reflectance_init / (1 - spec.reflectance_init)))
 
     def _unit(self, x: torch.Tensor) -> torch.Tensor:
         return (x / self.spec.bound + 1) * 0.5
@@ -107,16 +114,26 @@ class SDFField(nn.Module):
         """``(N, 3)`` -> ``(N,)``."""
         return self.forward(x)[0]
 
-    def diffuse(self, x: torch.Tensor, features: torch.Tensor) -> torch.Tensor:
-        """View-independent linear diffuse radiance ``(N, 3)`` (non-negative, may exceed 1).
+    def surface(self, x: torch.Tensor, features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """The surface's view-independent properties at ``(N, 3)`` points with their ``(N, feature_dim)`` features.
 
         The SDF's features are layer-normalized first: the geometry terms alone (mask warm-up) let their
         scale drift, and an unnormalized drift can push the head into softplus' flat tail for good.
+
+        Returns:
+            linear diffuse radiance ``(N, 3)`` (non-negative, may exceed 1), and the RGB reflectance at normal
+            incidence ``(N, 3)`` in (0, 1) when ``spec.reflectance`` is "tinted" (else None).
         """
         parts = [x, F.layer_norm(features, features.shape[-1:])]
         if self.texture_grid is not None:
             parts.append(self.texture_grid(self._unit(x)))
-        return F.softplus(self.diffuse_net(torch.cat(parts, dim=-1)))
+        out = self.diffuse_net(torch.cat(parts, dim=-1))
+        reflectance = torch.sigmoid(out[:, 3:]) if self.spec.reflectance == "tinted" else None
+        return F.softplus(out[:, :3]), reflectance
+
+    def diffuse(self, x: torch.Tensor, features: torch.Tensor) -> torch.Tensor:
+        """View-independent linear diffuse radiance ``(N, 3)`` (:meth:`surface`'s first part)."""
+        return self.surface(x, features)[0]
 
 
 @dataclass(frozen=True)

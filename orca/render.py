@@ -96,6 +96,20 @@ def fresnel_dielectric(cos_theta: torch.Tensor, ior: float) -> torch.Tensor:
     return 0.5 * (rs.square() + rp.square())
 
 
+def fresnel_schlick(cos_theta: torch.Tensor, f0: torch.Tensor) -> torch.Tensor:
+    """Schlick's Fresnel: ``f0 + (1 - f0) (1 - cos θ)^5`` with an RGB reflectance at normal incidence (a metal's
+    colour; a clear coat at IOR 1.5 has 0.04 in every channel, and Schlick's curve then stays within 0.04 of
+    the exact :func:`fresnel_dielectric` at any angle).
+
+    Args:
+        cos_theta: ``(...)`` cosine of the incidence angle, in [0, 1]; f0: ``(..., 3)``.
+    Returns:
+        ``(..., 3)``.
+    """
+    grazing = (1 - cos_theta.clamp(0.0, 1.0)).pow(5)[..., None]
+    return f0 + (1 - f0) * grazing
+
+
 def stratified_edges(
     m: int, n: int, deterministic: bool, dtype: torch.dtype, device: torch.device
 ) -> torch.Tensor:
@@ -255,12 +269,15 @@ def shade_specular(
     curvature: torch.Tensor,
     share: torch.Tensor,
     spec: RenderSpec,
+    reflectance: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Specular radiance of ``K`` surface samples per ray: Fresnel × environment along their virtual cones.
 
     Args:
         origins, dirs: ``(N, 3)``; radii: ``(N,)``.
         points, normals: ``(N, K, 3)``; curvature, share: ``(N, K)`` (share: each sample's weight).
+        reflectance: ``(N, K, 3)`` the samples' reflectance at normal incidence (:func:`fresnel_schlick`), or
+            None: a clear coat's exact Fresnel at ``spec.ior`` (:func:`fresnel_dielectric`).
     Returns:
         specular ``(N, 3)``, cone weights ``(N, K, E)``, normalized cone edges ``(N, K, E + 1)``.
     """
@@ -274,8 +291,11 @@ def shade_specular(
         cone.t_start.reshape(-1), spec,
     )
     cos_i = (-(dirs[:, None] * normals).sum(-1)).abs()
-    fresnel = fresnel_dielectric(cos_i, spec.ior)
-    specular = ((share * fresnel)[..., None] * env_rgb.reshape(n, k, 3)).sum(1)
+    if reflectance is None:
+        fresnel = fresnel_dielectric(cos_i, spec.ior)[..., None]
+    else:
+        fresnel = fresnel_schlick(cos_i, reflectance)
+    specular = (share[..., None] * fresnel * env_rgb.reshape(n, k, 3)).sum(1)
     return specular, env_w.reshape(n, k, -1), env_s.reshape(n, k, -1)
 
 
@@ -336,7 +356,8 @@ def render_rays(
     density = volsdf_density(sdf.reshape(n, s_count), beta)
     w, _ = composite_weights(density, t)
     opacity = w.sum(-1)
-    diffuse = (w[..., None] * sdf_field.diffuse(flat, feats).reshape(n, s_count, 3)).sum(-2)
+    diffuse_radiance, reflectance = sdf_field.surface(flat, feats)
+    diffuse = (w[..., None] * diffuse_radiance.reshape(n, s_count, 3)).sum(-2)
     normals = safe_normalize(grad).reshape(n, s_count, 3)
     normal_map = (w[..., None] * normals).sum(-2)
     depth = (w * mid).sum(-1)
@@ -352,10 +373,12 @@ def render_rays(
         w_k = w_m.gather(1, top)  # (M, K) differentiable
         p_k = x_m.gather(1, top[..., None].expand(m, k, 3))
         n_k = normals_m.gather(1, top[..., None].expand(m, k, 3))
+        f0_k = None if reflectance is None else pick(reflectance.reshape(n, s_count, 3)).gather(
+            1, top[..., None].expand(m, k, 3))
         _, curv = normals_and_curvature_fd(sdf_field.sdf, p_k.reshape(-1, 3), spec.curvature_eps)
         share = w_k / w_k.sum(-1, keepdim=True).clamp_min(1e-8) * pick(opacity)[:, None]  # (M, K)
         shaded, env_w, env_s = shade_specular(
-            env_field, pick(origins), pick(dirs), pick(radii), p_k, n_k, curv.reshape(m, k), share, spec
+            env_field, pick(origins), pick(dirs), pick(radii), p_k, n_k, curv.reshape(m, k), share, spec, f0_k
         )
         specular_rgb = shaded if shade is None else torch.zeros_like(diffuse).index_put((shade,), shaded)
     else:

@@ -590,6 +590,12 @@ class SDFConfig(StrictModel):
     hull_fit_batch: int = Field(8192, ge=64, description="points per step of that fit")
     hash_grid: HashGridConfig = Field(default_factory=HashGridConfig)
     texture_grid: TextureGridConfig = Field(default_factory=TextureGridConfig)
+    reflectance: Literal["dielectric", "tinted"] = Field(
+        "dielectric", description="the surface's reflections: dielectric, a clear coat's (glazed ceramic, plastic, "
+        "paint, glass: a few percent of the light, colourless; Fresnel at render.ior), or tinted, a colour learned "
+        "per surface point (metals: brass, copper, gold, steel, chrome reflect most of the light in their own "
+        "colour; Schlick's Fresnel starting from render.ior's)"
+    )
     levels_start: int = Field(4, ge=1, description="coarse-to-fine: hash-grid levels active at the start")
     levels_full: float = Field(0.3, ge=0, le=1, description="fraction of training after which all levels are active")
     beta_init: float = Field(0.05, gt=0, description="VolSDF's β (the density's sharpness) at the start")

@@ -30,6 +30,7 @@ def model_spec(cfg: TrainConfig, photos: int = 0):
             encoding=sdf.encoding, hash_grid=HashGridSpec(**sdf.hash_grid.model_dump()), hidden=sdf.hidden,
             layers=sdf.layers, init_radius=sdf.init_radius,
             texture_grid=HashGridSpec(**sdf.texture_grid.model_dump()) if sdf.texture_grid.levels else None,
+            reflectance=sdf.reflectance, reflectance_init=((render.ior - 1) / (render.ior + 1)) ** 2,
             bound=render.object_radius * 1.05,  # the SDF grid must cover the sampled sphere
         ),
         env=EnvironmentFieldSpec(

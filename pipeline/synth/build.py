@@ -200,10 +200,19 @@ def _diffuse(tex: dict[str, Any] | float | tuple[float, float, float]) -> dict[s
 
 
 def object_bsdf(scene: ResolvedScene, assets: SceneAssets, variant: Variant) -> dict[str, Any]:
-    """The object's coated material; ``diffuse``/``specular`` variants switch one lobe off (see module doc)."""
+    """The object's coated material; ``diffuse``/``specular`` variants switch one lobe off (see module doc). A bare
+    metal has no diffuse lobe: black in the ``diffuse`` variant, itself in the ``specular`` one."""
     obj = scene.spec.object
     if variant == "coverage":
         return _diffuse(1.0)
+    if obj.conductor is not None:
+        if variant == "diffuse":
+            return _diffuse(0.0)
+        metal: dict[str, Any] = {"type": "conductor" if obj.roughness is None else "roughconductor",
+                                 "material": obj.conductor}
+        if obj.roughness is not None:
+            metal |= {"alpha": obj.roughness, "distribution": "ggx"}
+        return metal
     if obj.albedo.texture:
         diffuse: dict[str, Any] = assets.bitmap(OBJECT_ID)
     else:

@@ -15,7 +15,8 @@ examples:
                                                        scene 7 of the random family, for poses/masks benchmarks
   orca synth tiles-3 /tmp/tiles3 --truth front_end     the same scene as random-3, in a tiled room
 
-scenes: sphere (glossy textured ball), torus (glossy red ring), blob (textured sphere with bumps and dents),
+scenes: sphere (glossy textured ball), gold (a polished gold ball in the same room), torus (glossy red ring), blob
+  (textured sphere with bumps and dents),
   random-<seed> (the randomized family, pipeline/synth/family.py: sphere, torus, blob, vase or mug; on the floor,
   on a plain table or floating; poster, plain or tiled room; a fifth to two thirds of the frame; one to three
   camera rings with gaps; varied lights and props), tiles-<seed> (random-<seed> in a room of plain tiles);

@@ -64,7 +64,7 @@ from ..log import progress
 from ..provenance import capture_record
 from . import build, geometry
 from .rig import PinholeView, capture_views, environment_views
-from .scenes import ResolvedScene, SceneSpec, get_scene, resolve
+from .scenes import ObjectSpec, ResolvedScene, SceneSpec, get_scene, resolve
 
 log = logging.getLogger("orca.synth")
 
@@ -543,10 +543,12 @@ def render_capture(scene: str | SceneSpec, out_dir: str | Path, options: SynthOp
             save_cameras(tmp / LAYOUT["environment"] / CAMERAS_JSON, CameraSet(
                 frame=Frame(), cameras=[v.camera(f"rgb/{v.name}.exr") for v in env_views]))
         factor = decoded_scale(gain, reference, SensorModel())
-        # What a person who knows the material would write: the coat's index of refraction (Fresnel).
+        # What a person who knows the material would write: the coat's index of refraction (Fresnel), or that
+        # the object is a metal.
+        material = ("  sdf:\n    reflectance: tinted  # a bare metal\n" if spec.object.conductor is not None else
+                    f"  render:\n    ior: {spec.object.int_ior}  # the object's coat (plastic, glaze)\n")
         (tmp / CAPTURE_YAML).write_text(
-            f"# Settings for this capture (see pipeline/config.py); written by orca synth.\n"
-            f"train:\n  render:\n    ior: {spec.object.int_ior}  # the object's coat (plastic, glaze)\n",
+            f"# Settings for this capture (see pipeline/config.py); written by orca synth.\ntrain:\n{material}",
             encoding="utf-8")
         write_json(tmp / LAYOUT["scene"], _scene_json(
             resolved, options, photos, residuals, factor, gain, env_views, mi.__version__))
@@ -602,6 +604,15 @@ def _write_view_truth(root: Path, stem: str, t: ViewTruth, kinds: tuple[str, ...
             write_png(folder / f"{stem}.png", np.round(t.coverage * 255).astype(np.uint8))
 
 
+def _material_json(obj: ObjectSpec) -> dict[str, Any]:
+    rough = obj.roughness is not None
+    if obj.conductor is not None:
+        return {"type": "roughconductor" if rough else "conductor", "metal": obj.conductor,
+                "roughness": obj.roughness}
+    return {"type": "roughplastic" if rough else "plastic", "int_ior": obj.int_ior, "ext_ior": 1.0,
+            "roughness": obj.roughness, "nonlinear": False}
+
+
 def _scene_json(scene: ResolvedScene, options: SynthOptions, photos: list[dict], residuals: list[dict],
                 factor: float, gain: float, env_views: list[PinholeView], mitsuba_version: str) -> dict[str, Any]:
     spec, obj = scene.spec, scene.spec.object
@@ -615,9 +626,8 @@ def _scene_json(scene: ResolvedScene, options: SynthOptions, photos: list[dict],
                        "cameras OpenCV (x right, y down, z forward), camera-to-world",
         "object": {
             "kind": obj.kind, "centre": [0.0, 0.0, 0.0], "radius": obj.radius, "mesh": "object.ply",
-            "material": {"type": "plastic" if obj.roughness is None else "roughplastic", "int_ior": obj.int_ior,
-                         "ext_ior": 1.0, "roughness": obj.roughness, "nonlinear": False},
-            "albedo": "object_albedo.png" if obj.albedo.texture else list(obj.albedo.rgb),
+            "material": _material_json(obj),
+            "albedo": None if obj.conductor else "object_albedo.png" if obj.albedo.texture else list(obj.albedo.rgb),
             "albedo_uv": "texel (row, column) = (v * height, u * width) of object_albedo.png (v = 0: top row), "
                          "(u, v) from object.ply; for the sphere also Mitsuba's analytic sphere UV: u = longitude "
                          "/ 2 pi (atan2(y, x)), v = polar angle from +z / pi",

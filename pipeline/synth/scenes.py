@@ -51,13 +51,17 @@ ObjectKind = Literal["sphere", "torus", "blob", "vase", "mug"]
 
 @dataclass(frozen=True)
 class ObjectSpec:
-    """The glossy object: a smooth (or slightly rough) dielectric coat over a diffuse base (Mitsuba plastic)."""
+    """The glossy object: a smooth (or slightly rough) dielectric coat over a diffuse base (Mitsuba plastic), or a
+    bare metal (``conductor``)."""
 
     kind: ObjectKind
     radius: float = 1.0  # bounding-sphere radius, centred at the origin
     albedo: AlbedoSpec = AlbedoSpec()
     int_ior: float = 1.9  # coat IOR (a glaze / lacquer): ~10 % reflected at normal incidence, more at grazing
     roughness: float | None = None  # None: smooth `plastic`; else `roughplastic` (GGX alpha)
+    # A Mitsuba conductor's measured metal ("Au", "Cu", "Ag", "Al", "Cr"...): the object is that bare metal
+    # (`conductor`, or `roughconductor` with ``roughness``), no diffuse base (albedo and int_ior unused).
+    conductor: str | None = None
     # torus: tube centre-line radius and tube radius, as fractions of `radius` (major + minor = 1)
     torus_major: float = 0.68
     torus_minor: float = 0.32
@@ -217,6 +221,13 @@ SCENES: dict[str, SceneSpec] = {
         props=DEFAULT_PROPS,
         lights=DEFAULT_LIGHTS,
         texture_seed=202,
+    ),
+    "gold": SceneSpec(  # the demo's room around a polished gold ball: a metal reflects in its own colour
+        name="gold",
+        object=ObjectSpec("sphere", conductor="Au"),
+        props=DEFAULT_PROPS,
+        lights=DEFAULT_LIGHTS,
+        texture_seed=101,
     ),
     "blob": SceneSpec(
         name="blob",

@@ -75,6 +75,20 @@ def test_diffuse_head_reads_its_own_texture_grid_and_survives_feature_drift():
     assert drifted.max() < 1.0 and drifted.min() > 1e-3
 
 
+def test_a_tinted_surface_starts_as_a_clear_coat_and_the_dielectric_has_no_reflectance():
+    torch.manual_seed(0)
+    x = torch.rand(32, 3) - 0.5
+    for reflectance, expected in (("dielectric", None), ("tinted", 0.04)):
+        field = SDFField(SDFFieldSpec(hash_grid=SMALL_GRID, reflectance=reflectance, reflectance_init=0.04))
+        diffuse, f0 = field.surface(x, field(x)[1])
+        torch.testing.assert_close(diffuse, torch.full_like(diffuse, 0.05), atol=0.03, rtol=0)
+        if expected is None:
+            assert f0 is None
+        else:
+            assert f0.shape == (32, 3)
+            torch.testing.assert_close(f0, torch.full_like(f0, expected), atol=0.01, rtol=0)
+
+
 def test_environment_field_gradients_stay_finite_for_zero_length_frustums():
     """A frustum of zero length at a cone's apex has zero variance; its gradient must not be NaN (it was,
     through the footprint's square root, and stopped a naive-cone training run)."""

@@ -9,7 +9,7 @@ import torch
 
 from orca.encoding import HashGridSpec
 from orca.fields import EnvironmentField, EnvironmentFieldSpec, SDFField, SDFFieldSpec
-from orca.render import RenderSpec, fresnel_dielectric, render_rays, shade_specular
+from orca.render import RenderSpec, fresnel_dielectric, fresnel_schlick, render_rays, shade_specular
 
 GRID = HashGridSpec(levels=4, log2_table_size=10, base_resolution=4, max_resolution=32)
 SPEC = RenderSpec(n_coarse=32, n_fine=16, env_samples=16, deterministic=True)
@@ -18,6 +18,17 @@ SPEC = RenderSpec(n_coarse=32, n_fine=16, env_samples=16, deterministic=True)
 def test_fresnel_dielectric_reference_values():
     f = fresnel_dielectric(torch.tensor([1.0, math.cos(math.radians(45)), 0.0]), 1.5)
     torch.testing.assert_close(f, torch.tensor([0.04, 0.0502, 1.0]), atol=2e-4, rtol=0)
+
+
+def test_schlick_fresnel_is_its_colour_head_on_total_at_grazing_and_a_clear_coats_at_004():
+    cos = torch.cos(torch.deg2rad(torch.linspace(0, 90, 91)))
+    gold = torch.tensor([1.0, 0.71, 0.29])
+    f = fresnel_schlick(cos, gold.expand(91, 3))
+    torch.testing.assert_close(f[0], gold)
+    torch.testing.assert_close(f[-1], torch.ones(3))
+    assert (f[1:] - f[:-1] >= 0).all()  # more reflection toward grazing, in every channel
+    coat = fresnel_schlick(cos, torch.full((91, 3), 0.04))
+    assert (coat - fresnel_dielectric(cos, 1.5)[:, None]).abs().max() < 0.04  # measured: 0.036, near 83 deg
 
 
 def _rays(n=64, seed=0):
@@ -124,6 +135,36 @@ def test_coarse_to_fine_cone_sampling_finds_the_walls_depth():
         torch.testing.assert_close(rgb, torch.full_like(rgb, 0.5), atol=1e-3, rtol=0)  # the wall, fully opaque
         errors[fine] = ((depth - truth).abs() / truth).mean().item()
     assert errors[16] < 0.06 and errors[16] < 0.15 * errors[0], errors  # measured: 54 % -> 4.4 %
+
+
+def test_a_tinted_surface_reflects_a_grey_room_in_its_own_colour():
+    """A sphere whose reflectance head gives gold everywhere, in a room that is 0.5 grey in every direction: each
+    ray's specular is its opacity x Schlick's Fresnel of gold at its incidence x 0.5; the dielectric field gives a
+    colourless 4 % at normal incidence. The reflectance head's parameters get the specular's gradient."""
+    torch.manual_seed(0)
+    gold = torch.tensor([0.9, 0.6, 0.25])
+    room = _Wall(at=-1e9)  # opaque and grey from the first sample on
+    o, d, r = _rays(64)
+    hit, t_hit = _analytic_hit(o, d, 0.5)
+    frontal = hit & (-(d * torch.nn.functional.normalize(o + t_hit[:, None] * d, dim=-1)).sum(-1) > 0.3)
+    cos = -(d * torch.nn.functional.normalize(o + t_hit[:, None] * d, dim=-1)).sum(-1)
+    specular = {}
+    for reflectance in ("dielectric", "tinted"):
+        sdf = SDFField(SDFFieldSpec(hash_grid=GRID, init_radius=0.5, reflectance=reflectance))
+        if reflectance == "tinted":
+            with torch.no_grad():
+                sdf.diffuse_net[-1].weight[3:].zero_()
+                sdf.diffuse_net[-1].bias[3:] = torch.logit(gold)
+        out = render_rays(sdf, room, torch.tensor(0.005), o, d, r, SPEC)
+        specular[reflectance] = out.specular
+        if reflectance == "tinted":
+            (g,) = torch.autograd.grad(out.specular.sum(), sdf.diffuse_net[-1].bias)
+            assert (g[3:] > 0).all() and (g[:3] == 0).all()
+    expected = out.opacity[:, None] * fresnel_schlick(cos, gold.expand(64, 3)) * 0.5
+    torch.testing.assert_close(specular["tinted"][frontal], expected[frontal], atol=5e-3, rtol=0.03)
+    coat = out.opacity * fresnel_dielectric(cos, 1.5) * 0.5
+    torch.testing.assert_close(specular["dielectric"][frontal], coat[frontal, None].expand(-1, 3), atol=2e-3,
+                               rtol=0.03)
 
 
 class _Slab(torch.nn.Module):

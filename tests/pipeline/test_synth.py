@@ -10,6 +10,7 @@ import argparse
 from dataclasses import replace
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from helpers import small
@@ -365,6 +366,30 @@ def test_mesh_scenes_render(tmp_path: Path):
         assert _distance_to_surface(SCENES[name], pts).max() < 3e-3
         residual = read_json(gt / "scene.json")["decomposition_residual"]["relative_mean"]["max"]
         assert residual < 0.1  # few interior pixels at this size; interreflections add ~1 %
+
+
+def test_a_gold_ball_is_all_reflection_in_golds_colour_and_its_capture_says_metal(tmp_path: Path):
+    """The gold scene (a Mitsuba conductor, no diffuse base): its diffuse truth is black, its specular truth the
+    whole photo, redder than the room it reflects (gold reflects ~95 % of red, ~40 % of blue); capture.yaml asks
+    training for a tinted reflectance."""
+    from pipeline.config import load_config
+
+    out = render_capture(small(SCENES["gold"]), tmp_path / "gold",
+                         SynthOptions(views=1, width=64, height=48, spp=32, env_size=8, coverage_spp=16))
+    gt = out / "ground_truth"
+    assert load_config(out / "capture.yaml").train.sdf.reflectance == "tinted"
+    assert read_json(gt / "scene.json")["object"]["material"]["type"] == "conductor"
+    name = load_cameras(gt / "cameras.json").cameras[0].name
+    # interior: no room in the pixel, nor blurred into it (the photos' optics blur)
+    obj = cv2.erode((read_image(gt / "coverage" / f"{name}.png") == 255).astype(np.uint8), np.ones((7, 7))) > 0
+    diffuse, specular, linear = (read_exr(gt / sub / f"{name}.exr") for sub in ("diffuse", "specular", "linear"))
+    assert obj.sum() > 50
+    assert np.abs(diffuse[obj]).max() < 1e-3
+    np.testing.assert_allclose(specular[obj].mean(0), linear[obj].mean(0), rtol=0.05)
+    object_red_blue = specular[obj][:, 0].mean() / specular[obj][:, 2].mean()
+    room = read_image(gt / "coverage" / f"{name}.png") == 0
+    room_red_blue = linear[room][:, 0].mean() / linear[room][:, 2].mean()
+    assert object_red_blue > 1.5 * room_red_blue, (object_red_blue, room_red_blue)
 
 
 def test_blob_is_convex_and_concave():
