@@ -183,18 +183,7 @@ class EnvironmentField(nn.Module):
             density ``(N, S)`` (in world units⁻¹ of the contracted space) and radiance ``(N, S, 3)``.
         """
         n, s, _ = means.shape
-        r0 = self.spec.contract_radius
-        c_mean, c_var = contract_gaussian(means / r0, variances / r0**2)
-        if self.grid is not None:
-            unit = (c_mean / _CONTRACTED_RADIUS + 1) * 0.5
-            # footprint std in [0, 1] grid units: mean per-axis std of the contracted Gaussian. A zero-length
-            # frustum at a cone's apex (coarse and fine edges coincide there) has zero variance, where
-            # sqrt's gradient is infinite: the floor keeps it finite (and zero below the floor).
-            scale = c_var.clamp_min(0).mean(-1).clamp_min(_MIN_VARIANCE).sqrt() / (2 * _CONTRACTED_RADIUS)
-            enc = self.grid(unit.reshape(-1, 3), scale.reshape(-1)).reshape(n, s, -1)
-        else:
-            enc = integrated_positional_encoding(c_mean, c_var, 0, self.spec.ipe_max_deg)
-        h = self.trunk(enc)
+        h = self.trunk(self._encode(means, variances))
         density = F.softplus(h[..., 0] + self.spec.density_bias)
         feat = h[..., 1:]
         if self.spec.dir_freqs > 0:
@@ -202,6 +191,27 @@ class EnvironmentField(nn.Module):
             feat = torch.cat([feat, d], dim=-1)
         radiance = F.softplus(self.color(feat))
         return density, radiance
+
+    def density(self, means: torch.Tensor, variances: torch.Tensor) -> torch.Tensor:
+        """:meth:`forward`'s density alone, ``(N, S)``, for ``(N, S, 3)`` means and variances: the trunk's first
+        output without its features or the colour head (a coarse pass that only places samples needs no more)."""
+        hidden = self.trunk[:-1](self._encode(means, variances))
+        last = self.trunk[-1]
+        return F.softplus(F.linear(hidden, last.weight[:1], last.bias[:1])[..., 0] + self.spec.density_bias)
+
+    def _encode(self, means: torch.Tensor, variances: torch.Tensor) -> torch.Tensor:
+        """``(N, S, 3)`` frustum means and variances -> ``(N, S, enc_dim)``, in the contracted space."""
+        n, s, _ = means.shape
+        r0 = self.spec.contract_radius
+        c_mean, c_var = contract_gaussian(means / r0, variances / r0**2)
+        if self.grid is None:
+            return integrated_positional_encoding(c_mean, c_var, 0, self.spec.ipe_max_deg)
+        unit = (c_mean / _CONTRACTED_RADIUS + 1) * 0.5
+        # footprint std in [0, 1] grid units: mean per-axis std of the contracted Gaussian. A zero-length
+        # frustum at a cone's apex (coarse and fine edges coincide there) has zero variance, where
+        # sqrt's gradient is infinite: the floor keeps it finite (and zero below the floor).
+        scale = c_var.clamp_min(0).mean(-1).clamp_min(_MIN_VARIANCE).sqrt() / (2 * _CONTRACTED_RADIUS)
+        return self.grid(unit.reshape(-1, 3), scale.reshape(-1)).reshape(n, s, -1)
 
     @property
     def directional(self) -> bool:

@@ -146,15 +146,16 @@ def normalized_distance(u: torch.Tensor, spec: RenderSpec) -> torch.Tensor:
 Solid = Callable[[torch.Tensor], torch.Tensor]  # (P, 3) points -> (P,) bool: inside the object
 
 
-def _frustums(env: EnvironmentField, apex, axis, radius_growth, t_start, u, solid: Solid | None = None):
-    """Density and radiance of the frustums between edges ``u`` ``(M, E + 1)`` past ``t_start``; no density
-    where ``solid`` says a frustum's mean lies inside the object."""
+def _frustums(env: EnvironmentField, apex, axis, radius_growth, t_start, u, solid: Solid | None = None,
+              radiance: bool = True):
+    """Density and (unless not ``radiance``: None) radiance of the frustums between edges ``u`` ``(M, E + 1)``
+    past ``t_start``; no density where ``solid`` says a frustum's mean lies inside the object."""
     t = t_start[:, None] + u
     means, variances = conical_frustum_gaussian(apex, axis, radius_growth, t[:, :-1], t[:, 1:])
-    density, radiance = env(means, variances, axis)
+    density, rgb = env(means, variances, axis) if radiance else (env.density(means, variances), None)
     if solid is not None:
         density = torch.where(solid(means.reshape(-1, 3)).reshape(density.shape), 0.0, density)
-    return density, radiance
+    return density, rgb
 
 
 def render_environment_along(
@@ -217,7 +218,7 @@ def environment_weights(
     u = environment_edges(spec, apex.shape[0], apex.dtype, apex.device)
     if spec.env_fine > 0:
         with torch.no_grad():
-            density, _ = _frustums(env, apex, axis, radius_growth, t_start, u, solid)
+            density, _ = _frustums(env, apex, axis, radius_growth, t_start, u, solid, radiance=False)
             w_coarse, _ = composite_weights(density, u)
             fine = sample_pdf(u, w_coarse, spec.env_fine, deterministic=spec.deterministic)
         u = torch.sort(torch.cat([u, fine], dim=-1), dim=-1).values
@@ -254,7 +255,7 @@ def free_space_opacity(
                          origins.device)
     t = s * torch.where(hit, entry, 0)[:, None]
     means, variances = conical_frustum_gaussian(origins, dirs, radii, t[:, :-1], t[:, 1:])
-    density, _ = env(means, variances, dirs)
+    density = env.density(means, variances)
     _, transmittance = composite_weights(density, t)
     return 1.0 - transmittance
 

@@ -43,6 +43,19 @@ def test_environment_field_shapes_and_gradients(encoding):
     assert d.grad is not None and torch.isfinite(d.grad).all() and d.grad.abs().sum() > 0
 
 
+@pytest.mark.parametrize("encoding", ["hashgrid", "ipe"])
+def test_the_environment_fields_density_alone_is_its_full_passs(encoding):
+    torch.manual_seed(0)
+    env = EnvironmentField(EnvironmentFieldSpec(encoding=encoding, hash_grid=SMALL_GRID, ipe_max_deg=6))
+    with torch.no_grad():
+        if env.grid is not None:
+            env.grid.table.normal_()
+    means, variances = torch.randn(8, 5, 3) * 3, torch.rand(8, 5, 3) * 0.1
+    density, _ = env(means, variances, torch.nn.functional.normalize(torch.randn(8, 3), dim=-1))
+    torch.testing.assert_close(env.density(means, variances), density, rtol=1e-6, atol=1e-7)
+    assert density.std() > 0
+
+
 def test_directional_environment_map_ignores_position_and_has_no_depth():
     from orca.render import RenderSpec, render_environment_along
 

@@ -197,6 +197,9 @@ class _FloaterBeforeTheLens(torch.nn.Module):
 
     directional = False
 
+    def density(self, means, variances):
+        return self(means, variances, None)[0]
+
     def forward(self, means, variances, dirs):
         x = means[..., 0]
         fog = x < -3.5

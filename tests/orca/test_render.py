@@ -109,6 +109,9 @@ class _Wall(torch.nn.Module):
 
     directional = False
 
+    def density(self, means, variances):
+        return self(means, variances, None)[0]
+
     def __init__(self, at: float):
         super().__init__()
         self.at = at
@@ -172,6 +175,9 @@ class _Slab(torch.nn.Module):
 
     directional = False
 
+    def density(self, means, variances):
+        return self(means, variances, None)[0]
+
     def __init__(self, lo: float, hi: float, wall: float):
         super().__init__()
         self.lo, self.hi, self.wall = lo, hi, wall
@@ -228,6 +234,9 @@ class _Fog(torch.nn.Module):
     """Constant density everywhere; grey."""
 
     directional = False
+
+    def density(self, means, variances):
+        return self(means, variances, None)[0]
 
     def __init__(self, sigma: float):
         super().__init__()
