@@ -23,7 +23,7 @@ def test_a_checkpoints_identity_compares_the_config_but_its_resume_neutral_keys(
     old_name = {new: old for old, new in MOVED["train"].items()}
     flat = {old_name.get(k, k): v for k, v in dotted(cfg.model_dump(mode="json")).items()
             if not k.startswith(("losses.", "environment.hash_grid.levels", "environment.hash_grid.max_res",
-                                 "sdf.init", "sdf.hull_"))}  # keys the flat versions did not have
+                                 "sdf.init", "sdf.hull_", "sdf.reflectance"))}  # keys the flat versions did not have
     neutral = {"iterations", "checkpoint_every", "preview_every", "preview_downscale", "log_every",
                "keep_checkpoints", "device", "env_fine_render", "env_depth_quantile"}
     earlier = {"config": {**{k: v for k, v in flat.items() if k not in neutral},
