@@ -4,6 +4,7 @@ rays of an analytic glossy sphere."""
 from __future__ import annotations
 
 import torch
+from analytic_fields import AnalyticEnvironment
 
 from orca.encoding import HashGridSpec
 from orca.fields import EnvironmentFieldSpec, SDFFieldSpec
@@ -191,14 +192,9 @@ def test_environment_views_from_inside_the_object_start_at_its_surface():
     assert bool((unmasked < 0.3).all()), unmasked.max()
 
 
-class _FloaterBeforeTheLens(torch.nn.Module):
+class _FloaterBeforeTheLens(AnalyticEnvironment):
     """White fog within 0.5 of a camera at x = -4, a grey wall at x > 3: the colour a floater gives a photo's
     background, unseen by any other camera."""
-
-    directional = False
-
-    def density(self, means, variances):
-        return self(means, variances, None)[0]
 
     def forward(self, means, variances, dirs):
         x = means[..., 0]

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import torch
+from analytic_fields import AnalyticEnvironment
 
 from orca.encoding import HashGridSpec
 from orca.fields import EnvironmentField, EnvironmentFieldSpec, SDFField, SDFFieldSpec
@@ -104,13 +105,8 @@ def test_photometric_loss_reaches_sdf_parameters_through_weights_and_reflection(
     assert sum(g.abs().sum() for g in g_spec) > 0
 
 
-class _Wall(torch.nn.Module):
+class _Wall(AnalyticEnvironment):
     """An analytic environment: empty space, then an opaque grey wall at x = ``at``."""
-
-    directional = False
-
-    def density(self, means, variances):
-        return self(means, variances, None)[0]
 
     def __init__(self, at: float):
         super().__init__()
@@ -149,8 +145,8 @@ def test_a_tinted_surface_reflects_a_grey_room_in_its_own_colour():
     room = _Wall(at=-1e9)  # opaque and grey from the first sample on
     o, d, r = _rays(64)
     hit, t_hit = _analytic_hit(o, d, 0.5)
-    frontal = hit & (-(d * torch.nn.functional.normalize(o + t_hit[:, None] * d, dim=-1)).sum(-1) > 0.3)
     cos = -(d * torch.nn.functional.normalize(o + t_hit[:, None] * d, dim=-1)).sum(-1)
+    frontal = hit & (cos > 0.3)
     specular = {}
     for reflectance in ("dielectric", "tinted"):
         sdf = SDFField(SDFFieldSpec(hash_grid=GRID, init_radius=0.5, reflectance=reflectance))
@@ -170,13 +166,8 @@ def test_a_tinted_surface_reflects_a_grey_room_in_its_own_colour():
                                rtol=0.03)
 
 
-class _Slab(torch.nn.Module):
+class _Slab(AnalyticEnvironment):
     """A thin dense slab (a floater) in front of an opaque wall; the wall is grey, the slab white."""
-
-    directional = False
-
-    def density(self, means, variances):
-        return self(means, variances, None)[0]
 
     def __init__(self, lo: float, hi: float, wall: float):
         super().__init__()
@@ -230,13 +221,8 @@ def test_a_trained_model_renders_deterministically_with_its_own_fine_samples():
     assert RenderSpec(env_fine=8).for_rendering().env_fine == 8  # no render count: training's
 
 
-class _Fog(torch.nn.Module):
+class _Fog(AnalyticEnvironment):
     """Constant density everywhere; grey."""
-
-    directional = False
-
-    def density(self, means, variances):
-        return self(means, variances, None)[0]
 
     def __init__(self, sigma: float):
         super().__init__()
