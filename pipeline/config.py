@@ -334,6 +334,23 @@ class MasksConfig(StrictModel):
         "beside it in a thin band (without: the blowtorch 0.915/0.862, but a floating torus's rim lost, worst view "
         "0.873 -> 0.838)"
     )
+    trim_colour_log_odds: float | None = Field(
+        1.5, gt=0, description="the final masks lose the pieces (wider than a disc of colour_open_px) that some view "
+        "sees past along the whole of their ray's way through the hull (trim_seen_through_votes) and whose colour "
+        "is this much likelier (natural log of the odds, trim_colour_bins per channel) in the room right around "
+        "the masks than in their cores, both pooled over every view: a gap between the object's parts that too few "
+        "views see through to carve shows the room that most views show beside the object "
+        "(pipeline.masking.colour.trim_room_colours; the blowtorch's every third photo 0.825/0.767 -> 0.851/0.814 "
+        "median/worst view; the synthetic family's scenes -0.005..+0.012 median, -0.010..+0.006 worst view; at 1.0 "
+        "the blowtorch 0.862, a sphere on a table's worst view -0.018; docs/masks.md). None: off"
+    )
+    trim_colour_bins: int = Field(16, ge=2, le=64, description="...colour histograms with this many bins per channel")
+    trim_seen_through_votes: float = Field(
+        0.75, gt=0, description="...a pixel may be trimmed where every voxel its ray crosses in the hull has at "
+        "least this many background votes (0.75: one view's, not a dark pixel's doubtful half vote). Higher: "
+        "fewer pixels; unrestricted, a dark glossy blob's rims, which mirror the room, went (worst view 0.962 -> "
+        "0.874)"
+    )
     seed_radius: float = Field(
         0.3, ge=0, lt=1, description="before any hull, the central part of the unit sphere's image (this fraction of "
         "its radius) is taken as object: the cameras converge on it (of the first sphere's radius when the "

@@ -7,9 +7,15 @@ wedge *is* the room beside it, while a mirror's rim shows a distorted room whose
 shows as well. So a pixel GrabCut would take as certain object is left to it as probable background where its
 colour is far more frequent in the certain background around the object than in the hull's deep core (its log
 odds, from colour histograms of the two).
+
+The same odds, pooled over the whole capture, trim the final masks where some view sees through the hull
+(:func:`trim_room_colours`): the room is the same room in every view, so the wedge a few views keep is outvoted by
+the many that show it beside the object.
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 import cv2
 import numpy as np
@@ -17,19 +23,28 @@ import numpy as np
 from .views import disc
 
 
+def colour_index(image: np.ndarray, bins: int) -> np.ndarray:
+    """``(H, W)`` int32: each pixel's colour histogram bin, ``bins`` per channel of the ``(H, W, 3)`` uint8
+    ``image``."""
+    q = image.astype(np.int32) * bins // 256
+    return (q[..., 0] * bins + q[..., 1]) * bins + q[..., 2]
+
+
+def log_odds_table(background: np.ndarray, object_: np.ndarray) -> np.ndarray:
+    """``(B,)`` float32: per bin, the natural log of p(bin | background) / p(bin | object), from the two
+    ``(B,)`` histograms' counts with one count added to every bin (a colour neither shows has odds 1)."""
+    b, o = background.astype(np.float64) + 1.0, object_.astype(np.float64) + 1.0
+    return np.log((b / b.sum()) / (o / o.sum())).astype(np.float32)
+
+
 def colour_log_odds(image: np.ndarray, background: np.ndarray, object_: np.ndarray, bins: int) -> np.ndarray:
     """``(H, W)`` float32: per pixel, the natural log of p(colour | ``background``) / p(colour | ``object_``),
     each a histogram of ``bins`` per channel over the ``(H, W)`` bool region's pixels of the ``(H, W, 3)`` uint8
     ``image``, with one count added to every bin (a colour neither region shows has odds 1)."""
-    q = image.astype(np.int32) * bins // 256
-    index = (q[..., 0] * bins + q[..., 1]) * bins + q[..., 2]
+    index = colour_index(image, bins)
     n = bins**3
-
-    def density(region: np.ndarray) -> np.ndarray:
-        counts = np.bincount(index[region], minlength=n).astype(np.float64) + 1.0
-        return counts / counts.sum()
-
-    return np.log(density(background) / density(object_)).astype(np.float32)[index]
+    return log_odds_table(np.bincount(index[background], minlength=n),
+                          np.bincount(index[object_], minlength=n))[index]
 
 
 def release_room_colours(image: np.ndarray, seeds: np.ndarray, deep_fraction: float, ring_px: int, bins: int,
@@ -55,4 +70,48 @@ def release_room_colours(image: np.ndarray, seeds: np.ndarray, deep_fraction: fl
         room = cv2.morphologyEx(room.astype(np.uint8), cv2.MORPH_OPEN, disc(open_px)) > 0
     out = seeds.copy()
     out[room] = cv2.GC_PR_BGD
+    return out
+
+
+def mask_samples(mask: np.ndarray, core_px: int, band_px: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """``(H, W)`` bool each: the object's sample, ``mask`` eroded by ``core_px``, and the room's, the ring from
+    ``band_px[0]`` to ``band_px[1]`` pixels outside it."""
+    m = mask.astype(np.uint8)
+    core = cv2.erode(m, disc(core_px)) > 0 if core_px else mask
+    band = (cv2.dilate(m, disc(band_px[1])) > 0) & ~(cv2.dilate(m, disc(band_px[0])) > 0)
+    return core, band
+
+
+def trim_room_colours(images: Sequence[np.ndarray], masks: Sequence[np.ndarray],
+                      trimmable: Sequence[np.ndarray | None], bins: int,
+                      log_odds: float, open_px: int, core_px: int, band_px: tuple[int, int], min_pixels: int
+                      ) -> list[np.ndarray]:
+    """The ``(H, W)`` bool ``masks`` of the ``(H, W, 3)`` uint8 ``images`` less the pieces coloured like the room
+    within each view's ``(H, W)`` bool ``trimmable`` region (None: the view is left as it is): wider than a disc of
+    ``open_px`` and with colour :func:`log_odds_table` above ``log_odds`` (averaged over that disc), the
+    histograms pooled over all views -- the object's from every mask eroded by ``core_px``, the room's from the
+    ring ``band_px`` outside it (:func:`mask_samples`). The wedge of floor a few views keep is the room most views
+    show beside the object; a mirror shows the room too, over its core as well, and a glossy rim in a band
+    (thin, or in no gap the views see through: the caller's ``trimmable``). Unchanged where either pooled sample
+    has fewer than ``min_pixels``."""
+    n = bins**3
+    indices = [colour_index(im, bins) for im in images]
+    room, obj = np.zeros(n, np.int64), np.zeros(n, np.int64)
+    for index, mask in zip(indices, masks):
+        core, band = mask_samples(mask, core_px, band_px)
+        obj += np.bincount(index[core], minlength=n)
+        room += np.bincount(index[band], minlength=n)
+    if obj.sum() < min_pixels or room.sum() < min_pixels:
+        return list(masks)
+    table = log_odds_table(room, obj)
+    out = []
+    for index, mask, where in zip(indices, masks, trimmable):
+        if where is None:
+            out.append(mask)
+            continue
+        odds = cv2.blur(table[index], (2 * open_px + 1,) * 2) if open_px else table[index]
+        piece = (mask & where & (odds > log_odds)).astype(np.uint8)
+        if open_px:
+            piece = cv2.morphologyEx(piece, cv2.MORPH_OPEN, disc(open_px))
+        out.append(mask & ~(piece > 0))
     return out

@@ -84,6 +84,11 @@ class SegmentOptions:
     colour_ring_px: int = 20
     colour_min_pixels: int = 50
     colour_open_px: int = 2
+    trim_colour_log_odds: float | None = 1.5
+    trim_colour_bins: int = 16
+    trim_core_px: int = 6
+    trim_band_px: tuple[int, int] = (3, 18)
+    trim_seen_through_votes: float = 0.75
     band_px: int = 4
     neighbours: int = 6
     neighbour_max_deg: float = 60.0
