@@ -340,9 +340,10 @@ class MasksConfig(StrictModel):
         "is this much likelier (natural log of the odds, trim_colour_bins per channel) in the room right around "
         "the masks than in their cores, both pooled over every view: a gap between the object's parts that too few "
         "views see through to carve shows the room that most views show beside the object "
-        "(pipeline.masking.colour.trim_room_colours; the blowtorch's every third photo 0.825/0.767 -> 0.851/0.814 "
-        "median/worst view; the synthetic family's scenes -0.005..+0.012 median, -0.010..+0.006 worst view; at 1.0 "
-        "the blowtorch 0.862, a sphere on a table's worst view -0.018; docs/masks.md). None: off"
+        "(pipeline.masking.colour.trim_room_colours; the blowtorch's every third photo with the reference cameras "
+        "0.826/0.769 -> 0.859/0.812 median/worst view; the synthetic family's scenes -0.005..+0.012 median, "
+        "-0.010..+0.006 worst view; at 1.0 the blowtorch gains more, a sphere on a table's worst view loses 0.018; "
+        "docs/masks.md). Not in the sphere prior's probes. None: off"
     )
     trim_colour_bins: int = Field(16, ge=2, le=64, description="...colour histograms with this many bins per channel")
     trim_seen_through_votes: float = Field(

@@ -74,8 +74,12 @@ def grown(masks: Sequence[np.ndarray], views: Sequence[View], growth: float) -> 
 
 
 def probe_options(opts: SegmentOptions) -> SegmentOptions:
-    """The cheap segmentation a probe runs: the sphere prior and one round of carving, no floor, no sweeps."""
-    return replace(opts, rounds=1, floor=False, sweep=False, front_sweep=False, through_floor=False)
+    """The cheap segmentation a probe runs: the sphere prior and one round of carving, no floor, no sweeps, no
+    colour trim (a probe asks how far the object reaches; trimmed there too, the sphere moved and the blowtorch's
+    every sixth photo scored 0.842 / 0.728, median / worst view, against 0.878 / 0.763 trimmed in the final masks
+    alone and 0.836 / 0.750 with no trim)."""
+    return replace(opts, rounds=1, floor=False, sweep=False, front_sweep=False, through_floor=False,
+                   trim_colour_log_odds=None)
 
 
 def framed_options(opts: SegmentOptions, radius: float) -> SegmentOptions:
