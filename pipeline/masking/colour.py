@@ -47,6 +47,18 @@ def colour_log_odds(image: np.ndarray, background: np.ndarray, object_: np.ndarr
                           np.bincount(index[object_], minlength=n))[index]
 
 
+def room_pieces(odds: np.ndarray, region: np.ndarray, log_odds: float, open_px: int) -> np.ndarray:
+    """``(H, W)`` bool: the pixels of the ``(H, W)`` bool ``region`` whose ``(H, W)`` float32 colour ``odds``
+    (:func:`colour_log_odds`) are above ``log_odds``; with ``open_px``, the odds averaged over a disc of that
+    radius and only pieces wider than it (a mirror's rim shows the room in a thin band)."""
+    if open_px:  # a piece's odds on average over the disc: noise leaves holes that opening would widen
+        odds = cv2.blur(odds, (2 * open_px + 1, 2 * open_px + 1))
+    room = region & (odds > log_odds)
+    if open_px:
+        room = cv2.morphologyEx(room.astype(np.uint8), cv2.MORPH_OPEN, disc(open_px)) > 0
+    return room
+
+
 def release_room_colours(image: np.ndarray, seeds: np.ndarray, deep_fraction: float, ring_px: int, bins: int,
                          log_odds: float, min_pixels: int, open_px: int = 0) -> np.ndarray:
     """GrabCut ``seeds`` (``(H, W)`` ``cv2.GC_*`` labels) with their certain object made probable background
@@ -62,12 +74,7 @@ def release_room_colours(image: np.ndarray, seeds: np.ndarray, deep_fraction: fl
     ring = (cv2.dilate(obj, disc(ring_px)) > 0) & (seeds == cv2.GC_BGD)
     if np.count_nonzero(deep) < min_pixels or np.count_nonzero(ring) < min_pixels:
         return seeds
-    odds = colour_log_odds(image, ring, deep, bins)
-    if open_px:  # a piece's odds on average over the disc: noise leaves holes that opening would widen
-        odds = cv2.blur(odds, (2 * open_px + 1, 2 * open_px + 1))
-    room = forced & ~deep & (odds > log_odds)
-    if open_px:
-        room = cv2.morphologyEx(room.astype(np.uint8), cv2.MORPH_OPEN, disc(open_px)) > 0
+    room = room_pieces(colour_log_odds(image, ring, deep, bins), forced & ~deep, log_odds, open_px)
     out = seeds.copy()
     out[room] = cv2.GC_PR_BGD
     return out
@@ -109,9 +116,5 @@ def trim_room_colours(images: Sequence[np.ndarray], masks: Sequence[np.ndarray],
         if where is None:
             out.append(mask)
             continue
-        odds = cv2.blur(table[index], (2 * open_px + 1,) * 2) if open_px else table[index]
-        piece = (mask & where & (odds > log_odds)).astype(np.uint8)
-        if open_px:
-            piece = cv2.morphologyEx(piece, cv2.MORPH_OPEN, disc(open_px))
-        out.append(mask & ~(piece > 0))
+        out.append(mask & ~room_pieces(table[index], mask & where, log_odds, open_px))
     return out

@@ -472,8 +472,10 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
         # parts that too few views see through to carve. A glossy rim showing the room is solid object to every
         # view that sees it inside its outline (unrestricted, a dark glossy blob in a poster room lost its rims:
         # worst view 0.962 -> 0.874).
-        firm = run_views(reproject, [(volume, v, opts.trim_seen_through_votes) for v in views], lambda: None)
-        trimmable = [None if i in fixed else h & ~f for i, (h, f) in enumerate(zip(hulls, firm))]
+        auto = [i for i in range(n) if i not in fixed]
+        firm = dict(zip(auto, run_views(reproject, [(volume, views[i], opts.trim_seen_through_votes) for i in auto],
+                                        lambda: None)))
+        trimmable = [hulls[i] & ~firm[i] if i in firm else None for i in range(n)]
         final = trim_room_colours([v.image for v in views], final, trimmable, opts.trim_colour_bins,
                                   opts.trim_colour_log_odds, opts.colour_open_px, opts.trim_core_px,
                                   opts.trim_band_px, opts.colour_min_pixels)
