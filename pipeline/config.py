@@ -304,6 +304,14 @@ class MasksConfig(StrictModel):
         "after our SfM 0.896/0.817 -> 0.899/0.819 median/worst view, with the reference cameras 0.935/0.853 -> "
         "0.935/0.863; docs/masks.md); a dark contact shadow the hull still holds is left to colour. None: off"
     )
+    stand_height: float = Field(
+        0.0, ge=0, lt=1, description="every round's hull stands on the support plane where it comes this close to "
+        "it (sphere radii; at least a voxel, which is the default): each voxel below that height takes the fewest "
+        "background votes of its column up to it, and the hull is cut at the plane itself. Carved alone, the hull "
+        "stopped at its lowest voxel centres, short of the plane by a band along every view's bottom outline "
+        "(docs/masks.md). Higher (0.03) also stands a glossy rim that mirrors the floor on it, but gives rounded "
+        "bottoms a skirt"
+    )
     core_fraction: float = Field(
         0.4, ge=0, lt=1, description="in every round but the last, GrabCut takes as certain object only the part of "
         "the hull's reprojection farther from its outline than this share of its deepest pixel's distance; the "

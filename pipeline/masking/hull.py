@@ -14,12 +14,15 @@ from .views import Plane, SegmentOptions, View, pixel_rays, sphere_box
 
 def hull_grid(resolution: int, plane: Plane | None) -> tuple[np.ndarray, np.ndarray]:
     """Voxel centres ``(V, 3)`` of the ``resolution``^3 grid over [-1, 1]^3 that lie in the unit sphere and
-    above the support plane, and their flat indices ``(V,)`` into the grid."""
+    above the support plane or less than a voxel below it, and their flat indices ``(V,)`` into the grid. The layer
+    under the plane is carved with the rest so that the votes just above the plane interpolate with carved ones,
+    not with the outside's; :func:`stand_on_plane` then gives it its column's votes and :func:`in_hull` cuts the
+    hull at the plane itself."""
     ax = (np.arange(resolution) + 0.5) / resolution * 2.0 - 1.0
     grid = np.stack(np.meshgrid(ax, ax, ax, indexing="ij"), -1).reshape(-1, 3)
     keep = np.einsum("ij,ij->i", grid, grid) < 1.0
     if plane is not None:
-        keep &= plane.height(grid) > 0.0
+        keep &= plane.height(grid) > -2.0 / resolution
     index = np.nonzero(keep)[0]
     return grid[index].astype(np.float32), index
 
@@ -92,6 +95,43 @@ def view_votes(pixels: Sequence[np.ndarray], masks: Sequence[np.ndarray], weight
     return seen, off
 
 
+def stand_on_plane(volume: np.ndarray, plane: Plane, height: float) -> np.ndarray:
+    """``(R, R, R)`` float32: the votes ``volume`` with every voxel less than ``height`` (at least a voxel) above
+    the support ``plane`` given the fewest votes along its column up to that height (the normal's direction,
+    sampled every half voxel): the hull stands on the plane wherever it comes that close to it. A glossy object's
+    bottom rim mirrors the floor beside it, every view's colours give it to the floor, and the carved hull stops
+    short of the plane by that rim (on the blowtorch's tank, a band along every view's bottom outline). The
+    voxels less than a voxel below the plane (:func:`hull_grid`), which only the interpolation just above it
+    reads (:func:`in_hull` cuts the hull at the plane), take their column's votes from the plane up, not their
+    own: the carve of the space under the object, which no view sees, stops wherever the views' rays below the
+    outline happen to pass, and the hull's bottom is its lowest layer's outline instead."""
+    res = volume.shape[0]
+    voxel = 2.0 / res
+    height = max(height, voxel)
+    ax = (np.arange(res) + 0.5) / res * 2.0 - 1.0
+    grid = np.stack(np.meshgrid(ax, ax, ax, indexing="ij"), -1)
+    above = plane.height(grid)
+    low = np.nonzero((above > -voxel) & (above < height) & (np.einsum("...i,...i->...", grid, grid) < 1.0))
+    points, level = grid[low], above[low]
+    out = volume.copy()
+    votes = np.where(level >= 0.0, out[low], OUTSIDE_VOTES).astype(np.float32)
+    step = voxel / 2.0
+    for t in np.arange(step, float(height - level.min(initial=0.0)) + step, step):
+        column = (t <= height - level) & (t >= -level)
+        votes[column] = np.minimum(votes[column], _votes_at(volume, points[column] + t * plane.normal))
+    out[low] = votes
+    return out
+
+
+def _votes_at(volume: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """``(M,)`` float32: the votes ``volume`` interpolated trilinearly at ``points`` ``(M, 3)`` (as :func:`in_hull`)."""
+    from scipy.ndimage import map_coordinates
+
+    res = volume.shape[0]
+    idx = (points + 1.0) * (res / 2.0) - 0.5
+    return map_coordinates(volume, idx.T, order=1, mode="constant", cval=OUTSIDE_VOTES).astype(np.float32)
+
+
 def carve_votes(opts: SegmentOptions, views: int) -> float:
     """Background votes that cut a voxel: ``carve_share`` of the views, at least ``carve_votes``."""
     return max(opts.carve_votes, round(opts.carve_share * views))
@@ -106,14 +146,12 @@ def core_carve_votes(opts: SegmentOptions, views: int) -> float | None:
     return votes if votes < carve_votes(opts, views) else None
 
 
-def in_hull(volume: np.ndarray, points: np.ndarray, max_votes: float) -> np.ndarray:
+def in_hull(volume: np.ndarray, points: np.ndarray, max_votes: float, plane: Plane | None = None) -> np.ndarray:
     """``(M,)`` bool: which of ``points`` ``(M, 3)`` lie in the hull ``volume < max_votes`` (``volume``: votes over
-    the grid on [-1, 1]^3, interpolated trilinearly, so the outline is finer than the voxels)."""
-    from scipy.ndimage import map_coordinates
-
-    res = volume.shape[0]
-    idx = (points + 1.0) * (res / 2.0) - 0.5
-    return map_coordinates(volume, idx.T, order=1, mode="constant", cval=OUTSIDE_VOTES) < max_votes
+    the grid on [-1, 1]^3, interpolated trilinearly, so the outline is finer than the voxels) and, given the
+    support ``plane``, on or above it."""
+    inside = _votes_at(volume, points) < max_votes
+    return inside & (plane.height(points) >= 0.0) if plane is not None else inside
 
 
 # a sample is in the hull only if a hull voxel's centre lies less than 1 voxel from it along every axis, and its
@@ -131,9 +169,10 @@ def hull_extent(volume: np.ndarray, max_votes: float) -> tuple[np.ndarray, np.nd
     return occupied.min(0) - 1, occupied.max(0) + 1
 
 
-def hull_depth(volume: np.ndarray, view: View, max_votes: float) -> np.ndarray:
+def hull_depth(volume: np.ndarray, view: View, max_votes: float, plane: Plane | None = None) -> np.ndarray:
     """``(H, W)`` float32: the distance along each pixel's ray to where it enters the hull ``volume < max_votes``
-    (:func:`in_hull`; ``inf``: it misses), marching in steps of half a voxel through the unit sphere.
+    cut at the support ``plane`` (:func:`in_hull`; ``inf``: it misses), marching in steps of half a voxel through
+    the unit sphere.
 
     A ray is sampled only inside the hull's box (:func:`hull_extent`), only until it enters, and it leaps over the
     samples its :func:`clearance` shows cannot be in the hull: the samples that decide and the answer are those
@@ -179,7 +218,7 @@ def hull_depth(volume: np.ndarray, view: View, max_votes: float) -> np.ndarray:
         close = reach <= 0
         inside = np.zeros(len(rays), bool)
         if close.any():
-            inside[close] = in_hull(volume, points[close], max_votes)
+            inside[close] = in_hull(volume, points[close], max_votes, plane)
         entry[rays[inside]] = t[inside]
         k = k + np.where(close, 1, np.maximum(np.ceil(reach / step_voxels[rays]), 1))
         going = ~inside & (k <= k_last[rays])
@@ -199,6 +238,7 @@ def clearance(volume: np.ndarray, max_votes: float) -> np.ndarray:
     return distance_transform_cdt(volume >= max_votes, metric="chessboard").astype(np.float32)
 
 
-def reproject(volume: np.ndarray, view: View, max_votes: float) -> np.ndarray:
-    """``(H, W)`` bool: pixels whose ray passes through the hull ``volume < max_votes`` (:func:`hull_depth`)."""
-    return np.isfinite(hull_depth(volume, view, max_votes))
+def reproject(volume: np.ndarray, view: View, max_votes: float, plane: Plane | None = None) -> np.ndarray:
+    """``(H, W)`` bool: pixels whose ray passes through the hull ``volume < max_votes`` cut at the support
+    ``plane`` (:func:`hull_depth`)."""
+    return np.isfinite(hull_depth(volume, view, max_votes, plane))

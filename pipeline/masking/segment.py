@@ -15,7 +15,17 @@ from ..metrics import iou
 from ..object_frame import camera_up
 from .colour import release_room_colours, trim_room_colours
 from .grabcut import first_seeds, grabcut, hull_seeds
-from .hull import OUTSIDE_VOTES, carve, carve_votes, core_carve_votes, hull_depth, hull_grid, reproject, voxel_pixels
+from .hull import (
+    OUTSIDE_VOTES,
+    carve,
+    carve_votes,
+    core_carve_votes,
+    hull_depth,
+    hull_grid,
+    reproject,
+    stand_on_plane,
+    voxel_pixels,
+)
 from .parallel import MapViews, serial
 from .support_plane import find_support_plane, floor_evidence
 from .sweeps import floor_through_hull, front_evidence, occluded_region, occluder_evidence
@@ -346,23 +356,23 @@ def final_mask(colour: np.ndarray, hull: np.ndarray, background: np.ndarray, occ
 
 def hull_evidence(view: View, volume: np.ndarray, max_votes: float, near: Sequence[View], around: Sequence[View],
                   plane: Plane | None, opts: SegmentOptions, core_votes: float | None = None,
-                  contact_height: float | None = None
+                  contact_height: float | None = None, props: bool = True
                   ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, np.ndarray | None, np.ndarray | None]:
     """One view's ``(depth, front, through, core, contact)``: where its rays enter the hull ``volume < max_votes``
-    (:func:`.hull.hull_depth`), and, given the support ``plane``, a prop in front of the hull
-    (:func:`.sweeps.front_evidence` against ``near``) and the floor seen through it
+    cut at the support ``plane`` (:func:`.hull.hull_depth`), and, given the plane and ``props``, a prop in front
+    of the hull (:func:`.sweeps.front_evidence` against ``near``) and the floor seen through it
     (:func:`.sweeps.floor_through_hull` against ``around``), the tighter hull ``volume < core_votes``
     reprojected (:func:`.hull.reproject`), and the hull's contact with the plane up to ``contact_height``
     (:func:`contact_band`, less the dark pixels: a contact shadow is dark, a glossy rim mirroring the floor is not),
     each None when not looked for."""
-    core = reproject(volume, view, core_votes) if core_votes is not None else None
-    depth = hull_depth(volume, view, max_votes)
+    core = reproject(volume, view, core_votes, plane) if core_votes is not None else None
+    depth = hull_depth(volume, view, max_votes, plane)
     front = through = contact = None
     if plane is not None and contact_height is not None:
         contact = contact_band(view, depth, plane, contact_height) & (view.image.max(-1) > opts.dark_level)
-    if plane is not None and opts.front_sweep:
+    if plane is not None and props and opts.front_sweep:
         front = front_evidence(view, near, plane, depth, volume, max_votes, opts)
-    if plane is not None and opts.through_floor:
+    if plane is not None and props and opts.through_floor:
         through = floor_through_hull(view, around, plane, np.isfinite(depth), opts)
     return depth, front, through, core, contact
 
@@ -414,6 +424,8 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
     for r in range(opts.rounds):
         weights = vote_weights(views, backgrounds, floors, fixed, opts, unexplained)
         volume = carve(masks, pixels, index, opts.hull_resolution, weights, run_views)
+        if plane is not None:
+            volume = stand_on_plane(volume, plane, opts.stand_height)
         votes = carve_votes(opts, n)
         core_votes = core_carve_votes(opts, n)
         core_max = None if core_votes is None else core_votes - 0.5
@@ -422,8 +434,9 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
         # Props in front of the object inside the sphere are found anew against each round's hull, from the second
         # (the sphere prior's masks make a hull too loose to have much in front of it).
         found = run_views(hull_evidence, [(v, volume, votes - 0.5, [views[j] for j in near[i]],
-                                           [views[j] for j in around[i]], plane if r > 0 and i not in fixed else None,
-                                           opts, core_max if i not in fixed else None, contact_height)
+                                           [views[j] for j in around[i]], plane, opts,
+                                           core_max if i not in fixed else None, contact_height,
+                                           r > 0 and i not in fixed)
                                           for i, v in enumerate(views)],
                           (lambda: step("evidence against the hull")) if r > 0 else (lambda: None))
         hulls = [np.isfinite(f[0]) for f in found]
@@ -473,8 +486,8 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
         # view that sees it inside its outline (unrestricted, a dark glossy blob in a poster room lost its rims:
         # worst view 0.962 -> 0.874).
         auto = [i for i in range(n) if i not in fixed]
-        firm = dict(zip(auto, run_views(reproject, [(volume, views[i], opts.trim_seen_through_votes) for i in auto],
-                                        lambda: None)))
+        firm = dict(zip(auto, run_views(reproject, [(volume, views[i], opts.trim_seen_through_votes, plane)
+                                                    for i in auto], lambda: None)))
         trimmable = [hulls[i] & ~firm[i] if i in firm else None for i in range(n)]
         final = trim_room_colours([v.image for v in views], final, trimmable, opts.trim_colour_bins,
                                   opts.trim_colour_log_odds, opts.colour_open_px, opts.trim_core_px,

@@ -72,6 +72,7 @@ class SegmentOptions:
     grabcut_iterations: int = 4
     hull_resolution: int = 128
     contact_height: float | None = 0.05
+    stand_height: float = 0.0
     carve_votes: float = 3.0
     carve_share: float = 0.2
     core_carve_share: float | None = 0.15

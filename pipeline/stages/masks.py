@@ -86,7 +86,7 @@ from ..layout import (
     stage_dir,
 )
 from ..log import progress
-from ..masking.hull import carve, carve_votes, hull_grid, reproject, voxel_pixels
+from ..masking.hull import carve, carve_votes, hull_grid, reproject, stand_on_plane, voxel_pixels
 from ..masking.parallel import view_workers
 from ..masking.prior import (
     PriorSphere,
@@ -242,10 +242,12 @@ def run_masks(
         # The hull of the final masks: the views' agreement and the object's bounding sphere.
         points, index = hull_grid(opts.hull_resolution, plane)
         votes = carve(final, voxel_pixels(points, views, run_views), index, opts.hull_resolution, run_views=run_views)
+        if plane is not None:
+            votes = stand_on_plane(votes, plane, opts.stand_height)
         hull_task = bar.add_task("hull", total=len(views))
         hulls = []
         for v in views:
-            hulls.append(reproject(votes, v, carve_votes(opts, len(views)) - 0.5))
+            hulls.append(reproject(votes, v, carve_votes(opts, len(views)) - 0.5, plane))
             bar.advance(hull_task)
     agreement = [iou(m, h) for m, h in zip(final, hulls)]
     c2w = np.stack([v.c2w for v in views])

@@ -21,6 +21,7 @@ from pipeline.masking.hull import (
     hull_grid,
     in_hull,
     reproject,
+    stand_on_plane,
     voxel_pixels,
 )
 from pipeline.masking.parallel import view_workers
@@ -800,6 +801,44 @@ def test_the_contact_band_is_where_rays_enter_the_hull_just_above_the_support_pl
             band = contact_band(v, hull_depth(standing, v, 0.5), FLOOR, 0.1)
             assert truth.sum() > 100 and iou(band, truth) > 0.8
             assert not contact_band(v, hull_depth(floating, v, 0.5), FLOOR, 0.1).any()
+
+
+def test_the_hull_of_a_box_standing_on_the_floor_reaches_the_floor_and_stops_there():
+    """A box standing on the floor z = -0.9, carved from its exact silhouettes at 32^3 (voxels 0.0625 wide; the
+    lowest centres above the floor 0.056 above it) and stood on the floor (at height 0: the layer under the floor
+    alone): its reprojection covers the box's bottom strip (what the views see of it 0.015-0.05 above the floor;
+    the last sliver is finer than the half-voxel steps along a grazing ray), which the carve alone, cut at its
+    lowest voxel centres, loses more of, and no more than the box."""
+    lo, hi = np.array([-0.3, -0.3, -0.9]), np.array([0.3, 0.3, 0.3])
+    views = ring_views(12, size=(240, 180), elevation_deg=15.0) + ring_views(12, size=(240, 180), elevation_deg=45.0)
+    for v in views:
+        v.K = np.array([[250.0, 0, 120], [0, 250.0, 90], [0, 0, 1]])
+    silhouettes = [np.isfinite(box_hit(v, lo, hi)[0]) for v in views]
+    points, index = hull_grid(32, FLOOR)
+    assert (FLOOR.height(points) < 0).any()  # a layer under the floor, for the votes to interpolate with
+    carved = carve(silhouettes, voxel_pixels(points, views), index, 32)
+    stood = stand_on_plane(carved, FLOOR, 0.0)
+    for v, box in zip(views[:12], silhouettes[:12]):
+        t, p = box_hit(v, lo, hi)
+        strip = np.isfinite(t) & (FLOOR.height(p) > 0.015) & (FLOOR.height(p) < 0.05)
+        hull = reproject(stood, v, 0.5, FLOOR)
+        covered = (hull & strip).sum() / strip.sum()
+        assert strip.sum() > 50 and covered > 0.8
+        assert covered > (reproject(carved, v, 0.5, FLOOR) & strip).sum() / strip.sum() + 0.2
+        assert (hull & ~box).sum() < 0.01 * box.sum()
+
+
+def test_a_hull_that_stops_just_short_of_the_floor_is_stood_on_it_and_one_floating_higher_is_not():
+    """A box whose bottom 0.03 above the floor was carved (its rim mirrors the floor in every view) stands on the
+    floor again; one floating 0.1 above it keeps its votes."""
+    lo, hi = np.array([-0.25, -0.25, -0.9]), np.array([0.25, 0.25, 0.2])
+    stood = stand_on_plane(box_votes(lo + [0, 0, 0.03], hi), FLOOR, 0.05)
+    floating = box_votes(lo + [0, 0, 0.1], hi)
+    np.testing.assert_array_equal(stand_on_plane(floating, FLOOR, 0.05) < 0.5, floating < 0.5)
+    for v in ring_views(4, size=(240, 180), elevation_deg=10.0):
+        v.K = np.array([[250.0, 0, 120], [0, 250.0, 90], [0, 0, 1]])
+        standing = np.isfinite(box_hit(v, lo, hi)[0])
+        assert iou(reproject(stood, v, 0.5, FLOOR), standing) > 0.97
 
 
 def test_a_bottom_rim_mirroring_the_carpet_is_kept_when_the_contact_band_is_forced():
