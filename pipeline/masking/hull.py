@@ -12,14 +12,19 @@ from .parallel import MapViews, serial
 from .views import Plane, SegmentOptions, View, pixel_rays, sphere_box
 
 
+def voxel_centres(resolution: int) -> np.ndarray:
+    """``(R, R, R, 3)`` float64: the centres of the ``resolution``^3 grid's voxels over [-1, 1]^3."""
+    ax = (np.arange(resolution) + 0.5) / resolution * 2.0 - 1.0
+    return np.stack(np.meshgrid(ax, ax, ax, indexing="ij"), -1)
+
+
 def hull_grid(resolution: int, plane: Plane | None) -> tuple[np.ndarray, np.ndarray]:
     """Voxel centres ``(V, 3)`` of the ``resolution``^3 grid over [-1, 1]^3 that lie in the unit sphere and
     above the support plane or less than a voxel below it, and their flat indices ``(V,)`` into the grid. The layer
     under the plane is carved with the rest so that the votes just above the plane interpolate with carved ones,
     not with the outside's; :func:`stand_on_plane` then gives it its column's votes and :func:`in_hull` cuts the
     hull at the plane itself."""
-    ax = (np.arange(resolution) + 0.5) / resolution * 2.0 - 1.0
-    grid = np.stack(np.meshgrid(ax, ax, ax, indexing="ij"), -1).reshape(-1, 3)
+    grid = voxel_centres(resolution).reshape(-1, 3)
     keep = np.einsum("ij,ij->i", grid, grid) < 1.0
     if plane is not None:
         keep &= plane.height(grid) > -2.0 / resolution
@@ -95,21 +100,23 @@ def view_votes(pixels: Sequence[np.ndarray], masks: Sequence[np.ndarray], weight
     return seen, off
 
 
-def stand_on_plane(volume: np.ndarray, plane: Plane, height: float) -> np.ndarray:
-    """``(R, R, R)`` float32: the votes ``volume`` with every voxel less than ``height`` (at least a voxel) above
-    the support ``plane`` given the fewest votes along its column up to that height (the normal's direction,
-    sampled every half voxel): the hull stands on the plane wherever it comes that close to it. A glossy object's
-    bottom rim mirrors the floor beside it, every view's colours give it to the floor, and the carved hull stops
-    short of the plane by that rim (on the blowtorch's tank, a band along every view's bottom outline). The
-    voxels less than a voxel below the plane (:func:`hull_grid`), which only the interpolation just above it
-    reads (:func:`in_hull` cuts the hull at the plane), take their column's votes from the plane up, not their
-    own: the carve of the space under the object, which no view sees, stops wherever the views' rays below the
-    outline happen to pass, and the hull's bottom is its lowest layer's outline instead."""
+def stand_on_plane(volume: np.ndarray, plane: Plane | None, height: float) -> np.ndarray:
+    """``(R, R, R)`` float32: the votes ``volume`` (as they are without a ``plane``) with every voxel less than
+    ``height`` (at least a voxel) above the support ``plane`` given the fewest votes along its column up to that
+    height (the normal's direction, sampled every half voxel): the hull stands on the plane wherever it comes
+    that close to it. A glossy object's bottom rim mirrors the floor beside it, every view's colours give it to
+    the floor, and the carved hull stops short of the plane by that rim (on the blowtorch's tank, a band along
+    every view's bottom outline). The voxels less than a voxel below the plane (:func:`hull_grid`), which only
+    the interpolation just above it reads (:func:`in_hull` cuts the hull at the plane), take their column's votes
+    from the plane up, not their own: the carve of the space under the object, which no view sees, stops
+    wherever the views' rays below the outline happen to pass, and the hull's bottom is its lowest layer's
+    outline instead."""
+    if plane is None:
+        return volume
     res = volume.shape[0]
     voxel = 2.0 / res
     height = max(height, voxel)
-    ax = (np.arange(res) + 0.5) / res * 2.0 - 1.0
-    grid = np.stack(np.meshgrid(ax, ax, ax, indexing="ij"), -1)
+    grid = voxel_centres(res)
     above = plane.height(grid)
     low = np.nonzero((above > -voxel) & (above < height) & (np.einsum("...i,...i->...", grid, grid) < 1.0))
     points, level = grid[low], above[low]

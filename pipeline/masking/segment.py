@@ -423,9 +423,8 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
     fronts: list[np.ndarray | None] = [None] * n
     for r in range(opts.rounds):
         weights = vote_weights(views, backgrounds, floors, fixed, opts, unexplained)
-        volume = carve(masks, pixels, index, opts.hull_resolution, weights, run_views)
-        if plane is not None:
-            volume = stand_on_plane(volume, plane, opts.stand_height)
+        volume = stand_on_plane(carve(masks, pixels, index, opts.hull_resolution, weights, run_views), plane,
+                                opts.stand_height)
         votes = carve_votes(opts, n)
         core_votes = core_carve_votes(opts, n)
         core_max = None if core_votes is None else core_votes - 0.5

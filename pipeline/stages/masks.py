@@ -241,9 +241,8 @@ def run_masks(
 
         # The hull of the final masks: the views' agreement and the object's bounding sphere.
         points, index = hull_grid(opts.hull_resolution, plane)
-        votes = carve(final, voxel_pixels(points, views, run_views), index, opts.hull_resolution, run_views=run_views)
-        if plane is not None:
-            votes = stand_on_plane(votes, plane, opts.stand_height)
+        votes = stand_on_plane(carve(final, voxel_pixels(points, views, run_views), index, opts.hull_resolution,
+                                     run_views=run_views), plane, opts.stand_height)
         hull_task = bar.add_task("hull", total=len(views))
         hulls = []
         for v in views:
