@@ -51,10 +51,10 @@ def compare(results: Path, radius: float, variant: dict[str, Any], every: int) -
     for i in range(0, len(views), every):
         others = [views[j] for j in near[i]]
         started = time.time()
-        a = occluder_evidence(views[i], others, base)
+        a = occluder_evidence(views[i], others, base)[0]
         out["seconds_default"] += time.time() - started
         started = time.time()
-        b = occluder_evidence(views[i], others, other)
+        b = occluder_evidence(views[i], others, other)[0]
         out["seconds_variant"] += time.time() - started
         view = {"swept": int(a.sum()), "lost": int((a & ~b).sum()), "gained": int((b & ~a).sum())}
         out["views"] += 1

@@ -389,6 +389,11 @@ class MasksConfig(StrictModel):
         "its dark contact shadow is lost by colour in the views from above; the views that see it against a lit "
         "background keep it (1: every vote counts fully)"
     )
+    confirmed_vote: float = Field(
+        3.0, ge=1, description="a background vote counts this much where the depth sweep explains the pixel by a "
+        "surface behind the sphere (the ray passes the object empty): a gap between the object's parts that a few "
+        "views see the room through is carved by fewer views than carve_share (see docs/masks.md)"
+    )
     dark_level: int = Field(
         48, ge=0, le=255, description="pixels whose brightest sRGB channel is at most this are dark (doubtful_vote)"
     )

@@ -26,7 +26,9 @@ does not cut it out of every other view; not many, because next to a thin part o
 along it can see the gap. A background vote counts fully where evidence confirms it (outside the sphere, the
 floor, the depth sweep) or where the pixel is not dark; a dark pixel's vote that nothing confirms counts
 ``doubtful_vote`` (0.5): the dark bottom of a glossy object on its dark contact shadow is lost by colour in every
-view from above, and only the few views that see it against a lit background say otherwise. The hull,
+view from above, and only the few views that see it against a lit background say otherwise. A vote from a pixel
+the depth sweep explains by a surface *behind* the sphere counts ``confirmed_vote`` (3): its ray passes the
+object empty, so a gap between the object's parts that few views see the room through is still carved. The hull,
 reprojected into every view, seeds the next round of GrabCut; a few rounds settle. The hull knows nothing of
 occlusion: where a prop stands between a camera and the object it covers the prop, and its core would force the
 prop into that view's mask. So, from the second round, planes parallel to the support plane are swept between

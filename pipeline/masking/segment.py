@@ -68,12 +68,14 @@ def _released(occluded: np.ndarray | None, front: np.ndarray | None, through: np
 
 def vote_weights(views: Sequence[View], backgrounds: Sequence[np.ndarray], floors: Sequence[np.ndarray | None],
                  fixed: dict[int, np.ndarray], opts: SegmentOptions,
-                 unexplained: Sequence[np.ndarray | None] | None = None) -> list[np.ndarray | None]:
+                 unexplained: Sequence[np.ndarray | None] | None = None,
+                 confirmed: Sequence[np.ndarray | None] | None = None) -> list[np.ndarray | None]:
     """Per view, ``(H, W)`` float32 what a background vote counts in :func:`carve` (None: 1 everywhere).
     ``doubtful_vote`` on dark pixels (brightest channel <= ``dark_level``) that no evidence confirms as background
     (outside the sphere, swept, floor): a dark object bottom and its dark contact shadow look alike, and views
-    from above lose the bottom by colour. At most ``unexplained_vote`` on the ``unexplained`` pixels
-    (:func:`unexplained_pixels`; None: nowhere)."""
+    from above lose the bottom by colour. ``confirmed_vote`` on the ``confirmed`` pixels (a surface behind the
+    sphere explains them: the ray passes the object empty; None: nowhere). At most ``unexplained_vote`` on the
+    ``unexplained`` pixels (:func:`unexplained_pixels`; None: nowhere)."""
     out: list[np.ndarray | None] = []
     for i, v in enumerate(views):
         if i in fixed:
@@ -84,6 +86,8 @@ def vote_weights(views: Sequence[View], backgrounds: Sequence[np.ndarray], floor
         if floors[i] is not None:
             sure = sure | floors[i]
         weight[~sure] = opts.doubtful_vote
+        if confirmed is not None and confirmed[i] is not None:
+            weight[confirmed[i]] = opts.confirmed_vote
         if unexplained is not None and unexplained[i] is not None:
             weight[unexplained[i]] = np.minimum(weight[unexplained[i]], opts.unexplained_vote)
         out.append(weight)
@@ -144,14 +148,15 @@ def unexplained_beside(masks: Sequence[np.ndarray], unexplained: Sequence[np.nda
 
 def view_evidence(view: View, near: Sequence[View] | None, nbrs: Sequence[View], plane: Plane | None,
                   outside: np.ndarray, opts: SegmentOptions
-                  ) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None]:
-    """One view's ``(occluded, floor, above)`` (:func:`.sweeps.occluder_evidence` against the sweep's neighbours
-    ``near``, None: no sweep; :func:`.support_plane.floor_evidence` against ``nbrs``, None: no ``plane``)."""
-    occluded = occluder_evidence(view, near, opts) if near is not None else None
+                  ) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None, np.ndarray | None]:
+    """One view's ``(occluded, beyond, floor, above)`` (:func:`.sweeps.occluder_evidence` against the sweep's
+    neighbours ``near``, None: no sweep; :func:`.support_plane.floor_evidence` against ``nbrs``, None: no
+    ``plane``)."""
+    occluded, beyond = occluder_evidence(view, near, opts) if near is not None else (None, None)
     if plane is None:
-        return occluded, None, None
+        return occluded, beyond, None, None
     floor, not_floor = floor_evidence(view, nbrs, plane, outside, opts)
-    return occluded, floor, not_floor
+    return occluded, beyond, floor, not_floor
 
 
 def view_masks(run_views: MapViews, fn: Callable[..., np.ndarray], tasks: Sequence[tuple[Any, ...]],
@@ -178,6 +183,7 @@ class Evidence:
     masks: list[np.ndarray]  # the first GrabCut masks (the user's where fixed)
     objects: list[np.ndarray | None]  # pixels where the view observed a sparse point on the object
     track_labels: dict[str, int] | None = None  # the sparse points per label (None: no points)
+    beyond: list[np.ndarray | None] | None = None  # pixels a surface behind the sphere explains (None: no sweep)
 
 
 def gather_evidence(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.ndarray] | None = None,
@@ -219,9 +225,7 @@ def gather_evidence(views: Sequence[View], opts: SegmentOptions, fixed: dict[int
     found = run_views(view_evidence, [(v, [views[j] for j in near[i]] if near is not None else None,
                                        [views[j] for j in nbrs[i]], plane, outsides[i], opts)
                                       for i, v in enumerate(views)], lambda: step("floor"))
-    occluded = [f[0] for f in found]
-    floors = [f[1] for f in found]
-    above = [f[2] for f in found]
+    occluded, beyond, floors, above = ([f[k] for f in found] for k in range(4))
     backgrounds = [o if swept is None else o | swept for o, swept in zip(outsides, occluded)]
 
     certain = [b if f is None else b | f for b, f in zip(backgrounds, floors)]
@@ -229,7 +233,7 @@ def gather_evidence(views: Sequence[View], opts: SegmentOptions, fixed: dict[int
                                                                    objects[i]), opts.grabcut_iterations)
                                             for i, v in enumerate(views) if i not in fixed], fixed, step)
     counts = None if labels is None else {name: int((labels == value).sum()) for name, value in LABELS.items()}
-    return Evidence(plane, spheres, floors, above, backgrounds, occluded, masks, objects, counts)
+    return Evidence(plane, spheres, floors, above, backgrounds, occluded, masks, objects, counts, beyond)
 
 
 def segment(views: Sequence[View], opts: SegmentOptions, fixed: dict[int, np.ndarray] | None = None,
@@ -422,7 +426,7 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
     through: list[np.ndarray | None] = [None] * n
     fronts: list[np.ndarray | None] = [None] * n
     for r in range(opts.rounds):
-        weights = vote_weights(views, backgrounds, floors, fixed, opts, unexplained)
+        weights = vote_weights(views, backgrounds, floors, fixed, opts, unexplained, evidence.beyond)
         volume = stand_on_plane(carve(masks, pixels, index, opts.hull_resolution, weights, run_views), plane,
                                 opts.stand_height)
         votes = carve_votes(opts, n)

@@ -61,8 +61,11 @@ def zncc_cost(grey: np.ndarray, stats: tuple[np.ndarray, np.ndarray], warped: np
     return np.where(flat, np.float32(np.inf), cost).astype(np.float32)
 
 
+WINDOW = 5  # pixels: the box over which plane_cost compares a view with its neighbours
+
+
 def plane_cost(view: View, others: Sequence[View], normal: np.ndarray, offset: float, rank: int,
-               window: int = 5, box: tuple[int, int, int, int] | None = None, min_views: int = 2,
+               window: int = WINDOW, box: tuple[int, int, int, int] | None = None, min_views: int = 2,
                match_exposure: bool = False, zncc_min_std: float | None = None) -> np.ndarray:
     """``(h, w)`` float32 over ``box`` (default: the whole image): how badly the plane ``normal . x = offset``
     explains each pixel -- the ``rank``-th smallest (1-based) over the neighbours of the mean absolute sRGB

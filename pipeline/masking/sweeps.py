@@ -11,12 +11,12 @@ import numpy as np
 
 from ..object_frame import pixels_of, project
 from .hull import in_hull
-from .support_plane import plane_cost, ranked_cost, window_difference
+from .support_plane import WINDOW, plane_cost, ranked_cost, window_difference
 from .views import Plane, SegmentOptions, View, disc, pixel_rays, sphere_box
 
 
 def outside_cost(view: View, others: Sequence[View], rank: int, step_px: float, near: float, far: float,
-                 match_exposure: bool = False) -> tuple[np.ndarray, tuple[int, int, int, int]] | None:
+                 match_exposure: bool = False) -> tuple[np.ndarray, np.ndarray, tuple[int, int, int, int]] | None:
     """How well something *outside* the unit sphere -- a prop in front of it, a wall or prop behind it --
     explains each pixel of the sphere's image: the best ``rank``-th neighbour cost of :func:`plane_cost` over
     fronto-parallel planes at depths from ``near`` to ``far`` times the camera's distance from the centre,
@@ -26,7 +26,8 @@ def outside_cost(view: View, others: Sequence[View], rank: int, step_px: float, 
     neighbour.
 
     Returns:
-        (``(h, w)`` float32 cost over the box, ``box``), or None when the sphere is not in view.
+        (``(h, w)`` float32 cost over the box, the same over the planes behind the sphere alone, ``box``), or None
+        when the sphere is not in view.
     """
     box = sphere_box(view)
     if box is None or not others:
@@ -45,14 +46,17 @@ def outside_cost(view: View, others: Sequence[View], rank: int, step_px: float, 
     baseline = max(float(np.linalg.norm(other.c2w[:3, 3] - o)) for other in others)
     count = int(np.ceil(view.K[0, 0] * baseline * (1.0 / z_near - 1.0 / z_far) / step_px)) + 1
     best = np.full(entry.shape, np.inf, np.float32)
+    beyond = np.full(entry.shape, np.inf, np.float32)
     for inv in np.linspace(1.0 / z_near, 1.0 / z_far, count):
         z = 1.0 / inv
-        valid = (z < entry) | (z > exit_)
+        behind = z > exit_
+        valid = (z < entry) | behind
         if not valid.any():
             continue
         cost = plane_cost(view, others, axis, float(axis @ o) + z, rank, box=box, match_exposure=match_exposure)
         np.minimum(best, np.where(valid, cost, np.inf), out=best)
-    return best, box
+        np.minimum(beyond, np.where(behind, cost, np.inf), out=beyond)
+    return best, beyond, box
 
 
 def local_contrast(image: np.ndarray, window: int = 5) -> np.ndarray:
@@ -74,25 +78,37 @@ def corner_strength(image: np.ndarray, window: int = 5) -> np.ndarray:
     return (a + c) / 2.0 - np.sqrt(((a - c) / 2.0) ** 2 + b * b)
 
 
-def occluder_evidence(view: View, others: Sequence[View], opts: SegmentOptions) -> np.ndarray:
-    """``(H, W)`` bool: textured, unclipped pixels of the sphere's image that a surface outside the sphere
-    explains (:func:`outside_cost`): a prop in front of the object, the room behind it."""
+def occluder_evidence(view: View, others: Sequence[View], opts: SegmentOptions) -> tuple[np.ndarray, np.ndarray]:
+    """``(H, W)`` bool twice: textured, unclipped pixels of the sphere's image that a surface outside the sphere
+    explains (:func:`outside_cost`) -- a prop in front of the object, the room behind it -- and those a surface
+    behind the sphere explains with every pixel of their comparison window: their rays pass the whole sphere,
+    object and all, empty. A window that straddles a thin part (a mug's handle) matches the room behind it, so
+    its centre alone may be the part's."""
     found = outside_cost(view, others, opts.sweep_rank, opts.sweep_step_px, opts.sweep_near, opts.sweep_far,
                          match_exposure=opts.match_exposure)
     if found is None:
-        return np.zeros(view.shape, bool)
-    cost, box = found
-    return _matched(view, cost, box, opts.sweep_threshold, opts)
+        return np.zeros(view.shape, bool), np.zeros(view.shape, bool)
+    cost, beyond, box = found
+    whole_window = cv2.erode((beyond < opts.sweep_threshold).astype(np.uint8), np.ones((WINDOW, WINDOW), np.uint8))
+    return (_matched(view, cost, box, opts.sweep_threshold, opts),
+            _textured(view, whole_window > 0, box, opts))
 
 
 def _matched(view: View, cost: np.ndarray, box: tuple[int, int, int, int], threshold: float,
              opts: SegmentOptions) -> np.ndarray:
     """``(H, W)`` bool: the pixels of ``box`` whose sweep ``cost`` is under ``threshold``, textured and away from
     clipped highlights (a highlight's outline can match at a wrong depth; it is never evidence)."""
+    return _textured(view, cost < threshold, box, opts)
+
+
+def _textured(view: View, explained: np.ndarray, box: tuple[int, int, int, int], opts: SegmentOptions
+              ) -> np.ndarray:
+    """``(H, W)`` bool: the ``explained`` pixels of ``box`` (``(h, w)`` bool over it) that are textured and away
+    from clipped highlights (see :func:`_matched`)."""
     x0, y0, x1, y1 = box
     out = np.zeros(view.shape, bool)
     textured = local_contrast(view.image[y0:y1, x0:x1]) > opts.texture_threshold
-    out[y0:y1, x0:x1] = (cost < threshold) & textured
+    out[y0:y1, x0:x1] = explained & textured
     if view.clipped is not None:
         out &= ~(cv2.dilate(view.clipped.astype(np.uint8), disc(2)) > 0)
     return out

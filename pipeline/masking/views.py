@@ -117,6 +117,7 @@ class SegmentOptions:
     sweep_far: float = 4.0
     seed_radius: float = 0.3
     doubtful_vote: float = 0.5
+    confirmed_vote: float = 3.0
     unexplained_vote: float = 1.0
     unexplained_max_rate: float = 0.4
     unexplained_retry_share: float = 0.4
