@@ -789,26 +789,38 @@ def test_grabcut_trims_a_hull_too_large_by_a_ring_of_carpet_only_when_its_core_i
     assert iou(masks[0.2], obj) > 0.9
 
 
+WEDGE = (np.array([0.45, -0.15, -0.3]), np.array([0.75, 0.15, 0.0]))  # a box beside a ball of radius 0.4
+
+
+def ball_beside_a_box(box: tuple[np.ndarray, np.ndarray], see_past: set[int]
+                      ) -> tuple[list[View], list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
+    """40 views (two rings of 20 at 160x120) of a ball (radius 0.4) at the origin and the axis-aligned ``box``
+    beside it, and per view: its mask (the ball, and the box too but in the views ``see_past``), the ball's
+    silhouette, and the box's pixels off the ball."""
+    views = ring_views(20, size=(160, 120)) + ring_views(20, size=(160, 120), elevation_deg=50.0)
+    masks, balls, boxes = [], [], []
+    for i, v in enumerate(views):
+        v.K = np.array([[150.0, 0, 80], [0, 150.0, 60], [0, 0, 1]])
+        ball = sphere_distance(v, radius=0.4) < 1.0
+        beside = np.isfinite(box_hit(v, *box)[0]) & ~ball
+        masks.append(ball if i in see_past else ball | beside)
+        balls.append(ball)
+        boxes.append(beside)
+    return views, masks, balls, boxes
+
+
 def test_a_wedge_few_views_see_past_is_in_the_hull_but_not_in_the_core_that_grabcut_must_keep():
     """A ball (radius 0.4) and a box beside it that loose masks keep in every view but the 7 of 40 that look
     across it (a wedge few views see past): 7 background votes do not cut it from the hull (20 %: 8 votes), but
     they cut it from the tighter hull the core comes from (15 %: 6 votes). So the wedge is probable object, for
     colour to decide, and GrabCut gives it back to the carpet; forced with the hull's own core it stays."""
-    views = ring_views(20, size=(160, 120)) + ring_views(20, size=(160, 120), elevation_deg=50.0)
-    wedge_lo, wedge_hi = np.array([0.45, -0.15, -0.3]), np.array([0.75, 0.15, 0.0])
-    SEE_PAST = {4, 5, 6, 14, 15, 16, 25}  # noqa: N806 -- the views looking across the wedge, beside the ball
+    see_past = {4, 5, 6, 14, 15, 16, 25}  # the views looking across the wedge, beside the ball
+    views, masks, balls, wedges = ball_beside_a_box(WEDGE, see_past)
     rng = np.random.default_rng(0)
-    masks, balls, wedges = [], [], []
-    for i, v in enumerate(views):
-        v.K = np.array([[150.0, 0, 80], [0, 150.0, 60], [0, 0, 1]])
-        ball = sphere_distance(v, radius=0.4) < 1.0
-        wedge = np.isfinite(box_hit(v, wedge_lo, wedge_hi)[0]) & ~ball
+    for v, ball in zip(views, balls):
         image = np.clip(rng.normal((150, 40, 60), 18, (120, 160, 3)), 0, 255)
         image[ball] = np.clip(rng.normal((170, 130, 60), 12, (ball.sum(), 3)), 0, 255)
         v.image[:] = image.astype(np.uint8)
-        masks.append(ball if i in SEE_PAST else ball | wedge)
-        balls.append(ball)
-        wedges.append(wedge)
     points, index = hull_grid(64, None)
     volume = carve(masks, voxel_pixels(points, views), index, 64)
     opts = SegmentOptions()
@@ -832,18 +844,9 @@ def test_a_gap_few_views_see_the_room_through_is_carved_when_the_sweep_confirms_
     the depth sweep confirms those pixels as room (a surface behind the sphere explains them) each vote counts
     ``confirmed_vote`` (3), and the gap leaves the hull; the ball, which no confirmed pixel covers, stays whole.
     Unconfirmed, or with a confirmed vote counting once (confirmed_vote 1), the gap stays."""
-    views = ring_views(20, size=(160, 120)) + ring_views(20, size=(160, 120), elevation_deg=50.0)
-    gap_lo, gap_hi = np.array([0.45, -0.15, -0.3]), np.array([0.75, 0.15, 0.0])
     see_through = {5, 15, 25}
-    masks, confirmed, balls, gaps = [], [], [], []
-    for i, v in enumerate(views):
-        v.K = np.array([[150.0, 0, 80], [0, 150.0, 60], [0, 0, 1]])
-        ball = sphere_distance(v, radius=0.4) < 1.0
-        gap = np.isfinite(box_hit(v, gap_lo, gap_hi)[0]) & ~ball
-        masks.append(ball if i in see_through else ball | gap)
-        confirmed.append(gap if i in see_through else np.zeros_like(gap))
-        balls.append(ball)
-        gaps.append(gap)
+    views, masks, balls, gaps = ball_beside_a_box(WEDGE, see_through)
+    confirmed = [gap if i in see_through else np.zeros_like(gap) for i, gap in enumerate(gaps)]
     for v in views:
         v.image[:] = 200  # lit: every background vote counts (no doubtful dark pixels)
     no_evidence = [np.zeros(v.shape, bool) for v in views]
