@@ -237,6 +237,10 @@ class PosesConfig(StrictModel):
         "doubted (a walk-around keeps its distance within ~2x; a weak view graph lets the global mapper put a "
         "camera far behind the others along its line of sight)."
     )
+    min_support_points: int = Field(
+        15, ge=0, description="a registered photo in which fewer of the final model's 3D points are seen is doubted: "
+        "its camera rests on too little (the relaxed pass's own bar for registering one; 0: no check)."
+    )
     up_max_deg: float = Field(
         10.0, gt=0, le=90, description="warn when the plane under the object (RANSAC on the sparse points) is tilted "
         "by more than this from the cameras' mean up (the masks stage searches the support plane within 10 degrees "

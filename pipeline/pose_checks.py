@@ -24,6 +24,12 @@ figure and a reason a person can read:
    (:func:`pipeline.object_frame.camera_up`). The floor or table under the object, fitted to the sparse points
    by RANSAC (:func:`pipeline.object_frame.support_plane`), should be perpendicular to it; a clearly supported
    plane tilted by more than ``poses.up_max_deg`` is reported (a frame-wide warning, not a photo's).
+5. **Weak support** (:func:`weak_support`): a camera the final model's 3D points support with fewer observations
+   than ``poses.min_support_points`` rests on too little to trust, however well those few reproject. The mapper's
+   last bundle adjustments and filtering can strip a photo of what registered it and leave the camera where it
+   was: on the blowtorch walk-around a photo ended with 10 observations and 37 degrees off the photographers'
+   camera while its axis still met the object (check 2 cannot see that); every right camera measured had 16 or
+   more.
 
 :func:`check_poses` runs them all (the up check on the cameras it is given) and returns a :class:`PoseChecks`
 for ``poses_report.json``. Arrays only; no files, no pycolmap.
@@ -58,9 +64,9 @@ class Suspect:
     """One photo whose pose a check doubts."""
 
     name: str
-    check: str  # "path_jump" | "axis_miss" | "looks_away" | "far_out"
+    check: str  # "path_jump" | "axis_miss" | "looks_away" | "far_out" | "weak_support"
     value: float  # the measured figure: step / median step (path_jump), degrees off the axis (axis_miss,
-    # looks_away), distance / median distance (far_out)
+    # looks_away), distance / median distance (far_out), observations (weak_support)
     limit: float  # the threshold it exceeded, same unit
     reason: str
 
@@ -283,6 +289,15 @@ def far_cameras(names: Sequence[str], centers: np.ndarray, point: np.ndarray,
     return suspects, median
 
 
+def weak_support(names: Sequence[str], support: np.ndarray, min_points: int) -> list[Suspect]:
+    """Cameras whose pose fewer than ``min_points`` of the model's 3D points support (``support`` ``(N,)``: the
+    observations of 3D points in each photo; see the module doc)."""
+    return [Suspect(names[i], "weak_support", float(support[i]), float(min_points),
+                    f"only {int(support[i])} of the model's 3D points are seen in it (fewer than "
+                    f"poses.min_support_points={min_points}): its camera rests on too little to trust")
+            for i in np.flatnonzero(np.asarray(support) < min_points)]
+
+
 # ----------------------------------------------------------------------------------------------------- up
 
 
@@ -314,7 +329,8 @@ def object_points(points: np.ndarray, c2w: np.ndarray, K: np.ndarray, sizes: np.
 
 
 def check_poses(names: Sequence[str], c2w: np.ndarray, K: np.ndarray, sizes: np.ndarray, matches: np.ndarray,
-                order: np.ndarray, order_by: str, points: np.ndarray | None, config: PosesConfig) -> PoseChecks:
+                order: np.ndarray, order_by: str, points: np.ndarray | None, config: PosesConfig,
+                support: np.ndarray | None = None) -> PoseChecks:
     """All the checks on one set of cameras.
 
     Args:
@@ -323,7 +339,8 @@ def check_poses(names: Sequence[str], c2w: np.ndarray, K: np.ndarray, sizes: np.
         order: ``(N,)`` indices into ``names`` in capture order (:func:`capture_order`), ``order_by`` what set it.
         points: ``(M, 3)`` sparse points, or None (no up check).
         config: the thresholds (``jump_ratio``, ``jump_min_match_share``, ``axis_miss_mads``, ``object_window``,
-            ``distance_ratio``, ``up_max_deg``, ``seed``).
+            ``distance_ratio``, ``min_support_points``, ``up_max_deg``, ``seed``).
+        support: ``(N,)`` observations of 3D points in each photo, or None (no support check: cameras not from SfM).
     """
     checks = PoseChecks(order_by)
     ordered = [names[i] for i in order]
@@ -335,7 +352,8 @@ def check_poses(names: Sequence[str], c2w: np.ndarray, K: np.ndarray, sizes: np.
     far = []
     if len(names) >= MIN_AXES and conditioning >= PARALLEL_AXES:  # else no point to measure distances from
         far, checks.median_distance = far_cameras(names, c2w[:, :3, 3], center, config.distance_ratio)
-    checks.suspects = jumps + misses + far
+    weak = [] if support is None else weak_support(names, support, config.min_support_points)
+    checks.suspects = jumps + misses + far + weak
     checks.notes += [note] if note else []
     if points is not None:
         checks.up = frame_up_check(points, c2w, K, sizes, camera_up(c2w), center, config)

@@ -819,6 +819,7 @@ def posed_from_reconstruction(rec: pycolmap.Reconstruction, names: Sequence[str]
         "mean_observations_per_image": float(rec.compute_mean_observations_per_reg_image()),
         "reprojection_error_px_per_image": dict(sorted((stem_of(rec.images[i].name), e)
                                                        for i, e in per_image_error.items())),
+        "observations_per_image": dict(sorted(observations(rec).items())),
     }
     return Posed(posed_names, c2w, lens, points, colors, stats)
 
@@ -866,6 +867,11 @@ def refine_without_object(rec: pycolmap.Reconstruction, posed: Posed, config: Po
     for xyz, track, color in kept:
         rec.add_point3D(xyz, track, color)
     return refined
+
+
+def observations(rec: pycolmap.Reconstruction) -> dict[str, int]:
+    """Each registered photo's (stem) observations of the model's 3D points."""
+    return {stem_of(im.name): im.num_points3D for im in rec.images.values() if im.has_pose}
 
 
 def camera_to_world(image: Any) -> np.ndarray:
@@ -955,16 +961,19 @@ def consecutive_matches(db_path: Path, order: Sequence[str]) -> np.ndarray:
         db.close()
 
 
-def checks_of(posed: Posed, db_path: Path, order: Sequence[str], order_by: str, config: PosesConfig) -> PoseChecks:
-    """:func:`pipeline.pose_checks.check_poses` on the registered photos of one run (``order``: all photos'
-    stems in capture order)."""
+def checks_of(posed: Posed, rec: pycolmap.Reconstruction, db_path: Path, order: Sequence[str], order_by: str,
+              config: PosesConfig) -> PoseChecks:
+    """:func:`pipeline.pose_checks.check_poses` on the registered photos of one run (``rec``: its model;
+    ``order``: all photos' stems in capture order)."""
     from .undistort import pinholes
 
     index = {n: i for i, n in enumerate(posed.names)}
     registered = [n for n in order if n in index]
     K, sizes = pinholes(posed.lens)
+    observed = observations(rec)
     return check_poses(posed.names, posed.c2w, K, sizes, consecutive_matches(db_path, registered),
-                       np.array([index[n] for n in registered], int), order_by, posed.points, config)
+                       np.array([index[n] for n in registered], int), order_by, posed.points, config,
+                       np.array([observed[n] for n in posed.names]))
 
 
 def posed_from_sfm_checked(decoded: DecodeArtifacts, names: list[str],
@@ -978,7 +987,7 @@ def posed_from_sfm_checked(decoded: DecodeArtifacts, names: list[str],
     index, order_by = capture_order(names, times)
     order = [names[i] for i in index]
     posed, rec = posed_from_sfm(decoded, names, calibration, mask_files, work, config, photo_dir)
-    checks = checks_of(posed, work / SFM_DATABASE, order, order_by, config)
+    checks = checks_of(posed, rec, work / SFM_DATABASE, order, order_by, config)
     runs = [_run_summary(config.matcher, posed, checks)]
     folders = [work]
     kept = CheckedSfm(posed, rec, checks, work, runs, folders)
@@ -999,7 +1008,7 @@ def posed_from_sfm_checked(decoded: DecodeArtifacts, names: list[str],
         log.warning("the stricter SfM run failed (%s); keeping the first", e.message)
         runs.append({"matching": "neighbours, strict", "failed": e.message})
         return kept
-    checks2 = checks_of(posed2, retry_work / SFM_DATABASE, order, order_by, config)
+    checks2 = checks_of(posed2, rec2, retry_work / SFM_DATABASE, order, order_by, config)
     runs.append(_run_summary("neighbours, strict", posed2, checks2))
     if _undoubted(posed2, checks2) > _undoubted(posed, checks):
         log.info("the stricter SfM run is kept: %d photos registered, %d doubted (first run: %d, %d)",
