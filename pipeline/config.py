@@ -175,6 +175,14 @@ class PosesConfig(StrictModel):
         "bench/results/front_end.jsonl, blowtorch.jsonl)."
     )
     max_num_features: int = Field(8192, ge=64, description="SIFT features kept per image.")
+    sift_affine_shape: bool = Field(
+        True, description="SIFT estimates each feature's affine shape (COLMAP's estimate_affine_shape): features "
+        "that survive the viewpoint changes of a sparse walk-around. CPU SIFT only."
+    )
+    sift_domain_size_pooling: bool = Field(
+        False, description="DSP-SIFT: descriptors pooled over several scales (COLMAP's domain_size_pooling). CPU "
+        "SIFT only; about twice the extraction time."
+    )
     sift_peak_threshold: float = Field(
         0.02 / 3, gt=0, description="SIFT's contrast threshold on difference-of-Gaussian peaks (COLMAP's default "
         "0.02 / octave_resolution): lower finds features in fainter texture, a plain wall's or floor's."

@@ -366,6 +366,8 @@ def extraction_options(config: PosesConfig, threads: int) -> pycolmap.FeatureExt
     extraction.max_image_size = config.max_image_size or -1
     extraction.sift.max_num_features = config.max_num_features
     extraction.sift.peak_threshold = config.sift_peak_threshold
+    extraction.sift.estimate_affine_shape = config.sift_affine_shape
+    extraction.sift.domain_size_pooling = config.sift_domain_size_pooling
     return extraction
 
 

@@ -20,6 +20,9 @@ OVERRIDES = ["poses.num_threads=2"]
 # Targets: every photo registered; poses as close to the reference as SfM at this size allows (1 px is about
 # 0.07 degrees); the masks of the issue.
 ROTATION_DEG_MEDIAN, ROTATION_DEG_MAX = 0.5, 2.0
+# Of the highest ring's 16 photos: 12 registered with SIFT's affine shapes (poses.sift_affine_shape), 8 without;
+# one photo of margin for the global mapper, whose result moves a little from machine to machine.
+RING_REGISTERED_MIN = 11
 CENTRE_MEDIAN_FRACTION, CENTRE_MAX_FRACTION = 0.02, 0.05  # of the cameras' mean distance from their centroid
 IOU_MEDIAN, IOU_WORST = 0.95, 0.90
 # Every sixth photo with the reference cameras: the sphere the masks ran in (the poses stage's is 1; the probes
@@ -60,7 +63,8 @@ def test_reference_masks_follow_the_poses_stages_undistortion():
 def test_the_cameras_that_register_agree_with_the_reference(tmp_path):
     """16 photos of the walk-around's highest ring (from _DSC1618) at 530x353: the photos that get a camera have
     the photographers' camera, within a fraction of a degree (a wrong pose reported as good is the failure that
-    matters most). Half of them register at this size (8 measured); all of them is the target below."""
+    matters most). 12 register at this size (with SIFT's affine shapes; 8 without them); all of them is the
+    target below."""
     photos = select_photos(DATASET, start=RING_START, limit=PHOTOS)
     capture = build_capture(tmp_path / "blowtorch", photos, DOWNSCALE)
     runs = run_front_end(capture, tmp_path / "results", OVERRIDES, ("decode", "poses"))
@@ -69,7 +73,7 @@ def test_the_cameras_that_register_agree_with_the_reference(tmp_path):
     figures = score(tmp_path / "results", photos, DATASET)
     poses = figures["poses"]
     print(figures["registered"], {k: v for k, v in poses.items() if k != "per_camera"})
-    assert figures["registered"] >= PHOTOS // 2
+    assert figures["registered"] >= RING_REGISTERED_MIN, figures["unregistered"]
     assert poses["rotation_deg_median"] <= ROTATION_DEG_MEDIAN and poses["rotation_deg_max"] <= ROTATION_DEG_MAX
     assert poses["center_median_fraction"] <= CENTRE_MEDIAN_FRACTION
     assert poses["center_max_fraction"] <= CENTRE_MAX_FRACTION
