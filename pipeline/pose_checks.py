@@ -2,7 +2,7 @@
 
 Repetitive textures (plain tiles, brick, a patterned floor) fool the matcher: a photo can register at the
 spot of another that looks the same, with a small reprojection error, and nothing in COLMAP's own figures
-says so. Three checks look at the cameras themselves; each returns the photos it doubts with the measured
+says so. The checks below look at the cameras themselves; each returns the photos it doubts with the measured
 figure and a reason a person can read:
 
 1. **Path jumps** (:func:`path_jumps`): in capture order (EXIF capture time when every photo has one, else
