@@ -263,7 +263,7 @@ def run_sfm(
     pycolmap.set_random_seed(config.seed)
 
     t = time.time()
-    extraction = extraction_options(config, threads)
+    extraction = extraction_options(config, threads, config.sift_affine_shape)
     pycolmap.Database.open(db_path).close()
     # A retry starts from the first run's database: its features exist, and the extractor skips them.
     extracted = set(_feature_counts(db_path)) >= set(names)
@@ -359,14 +359,15 @@ def extract_features(db_path: Path, image_dir: Path, groups: Sequence[CameraGrou
         )
 
 
-def extraction_options(config: PosesConfig, threads: int) -> pycolmap.FeatureExtractionOptions:
-    """SIFT as the poses section configures it."""
+def extraction_options(config: PosesConfig, threads: int,
+                       affine_shape: bool = False) -> pycolmap.FeatureExtractionOptions:
+    """SIFT as the poses section configures it; each feature's affine shape estimated when ``affine_shape``."""
     extraction = import_pycolmap().FeatureExtractionOptions()
     extraction.num_threads = threads
     extraction.max_image_size = config.max_image_size or -1
     extraction.sift.max_num_features = config.max_num_features
     extraction.sift.peak_threshold = config.sift_peak_threshold
-    extraction.sift.estimate_affine_shape = config.sift_affine_shape
+    extraction.sift.estimate_affine_shape = affine_shape
     extraction.sift.domain_size_pooling = config.sift_domain_size_pooling
     return extraction
 
@@ -427,7 +428,8 @@ def triangulate_known(posed: Posed, image_dir: Path, work: Path, config: PosesCo
     finally:
         db.close()
     t = time.time()
-    # the images are in the database already: the extractor keeps their cameras and only adds features
+    # the images are in the database already: the extractor keeps their cameras and only adds features; plain
+    # SIFT (no affine shapes, poses.sift_affine_shape says why)
     pycolmap.extract_features(db_path, image_dir, image_names=[colmap_name(n) for n in posed.names],
                               extraction_options=extraction_options(config, threads), device=pycolmap.Device.auto)
     pairs = viewing_pairs(posed.names, posed.c2w, config.known_pairs) if config.known_pairs else None
