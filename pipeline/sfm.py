@@ -263,7 +263,7 @@ def run_sfm(
     pycolmap.set_random_seed(config.seed)
 
     t = time.time()
-    extraction = extraction_options(config, threads, config.sift_affine_shape)
+    extraction = extraction_options(config, threads, affine_shape=config.sift_affine_shape)
     pycolmap.Database.open(db_path).close()
     # A retry starts from the first run's database: its features exist, and the extractor skips them.
     extracted = set(_feature_counts(db_path)) >= set(names)
@@ -359,8 +359,8 @@ def extract_features(db_path: Path, image_dir: Path, groups: Sequence[CameraGrou
         )
 
 
-def extraction_options(config: PosesConfig, threads: int,
-                       affine_shape: bool = False) -> pycolmap.FeatureExtractionOptions:
+def extraction_options(config: PosesConfig, threads: int, *,
+                       affine_shape: bool) -> pycolmap.FeatureExtractionOptions:
     """SIFT as the poses section configures it; each feature's affine shape estimated when ``affine_shape``."""
     extraction = import_pycolmap().FeatureExtractionOptions()
     extraction.num_threads = threads
@@ -430,8 +430,9 @@ def triangulate_known(posed: Posed, image_dir: Path, work: Path, config: PosesCo
     t = time.time()
     # the images are in the database already: the extractor keeps their cameras and only adds features; plain
     # SIFT (no affine shapes, poses.sift_affine_shape says why)
+    extraction = extraction_options(config, threads, affine_shape=False)
     pycolmap.extract_features(db_path, image_dir, image_names=[colmap_name(n) for n in posed.names],
-                              extraction_options=extraction_options(config, threads), device=pycolmap.Device.auto)
+                              extraction_options=extraction, device=pycolmap.Device.auto)
     pairs = viewing_pairs(posed.names, posed.c2w, config.known_pairs) if config.known_pairs else None
     matcher, num_pairs, num_verified = match_features(db_path, posed.names, work, config, threads, pairs=pairs)
     (work / "sparse").mkdir()
@@ -965,16 +966,15 @@ def consecutive_matches(db_path: Path, order: Sequence[str]) -> np.ndarray:
         db.close()
 
 
-def checks_of(posed: Posed, rec: pycolmap.Reconstruction, db_path: Path, order: Sequence[str], order_by: str,
-              config: PosesConfig) -> PoseChecks:
-    """:func:`pipeline.pose_checks.check_poses` on the registered photos of one run (``rec``: its model;
-    ``order``: all photos' stems in capture order)."""
+def checks_of(posed: Posed, db_path: Path, order: Sequence[str], order_by: str, config: PosesConfig) -> PoseChecks:
+    """:func:`pipeline.pose_checks.check_poses` on the registered photos of one run (``order``: all photos'
+    stems in capture order; each photo's support: its model's ``observations_per_image``)."""
     from .undistort import pinholes
 
     index = {n: i for i, n in enumerate(posed.names)}
     registered = [n for n in order if n in index]
     K, sizes = pinholes(posed.lens)
-    observed = observations(rec)
+    observed = posed.stats["observations_per_image"]
     return check_poses(posed.names, posed.c2w, K, sizes, consecutive_matches(db_path, registered),
                        np.array([index[n] for n in registered], int), order_by, posed.points, config,
                        np.array([observed[n] for n in posed.names]))
@@ -991,7 +991,7 @@ def posed_from_sfm_checked(decoded: DecodeArtifacts, names: list[str],
     index, order_by = capture_order(names, times)
     order = [names[i] for i in index]
     posed, rec = posed_from_sfm(decoded, names, calibration, mask_files, work, config, photo_dir)
-    checks = checks_of(posed, rec, work / SFM_DATABASE, order, order_by, config)
+    checks = checks_of(posed, work / SFM_DATABASE, order, order_by, config)
     runs = [_run_summary(config.matcher, posed, checks)]
     folders = [work]
     kept = CheckedSfm(posed, rec, checks, work, runs, folders)
@@ -1012,7 +1012,7 @@ def posed_from_sfm_checked(decoded: DecodeArtifacts, names: list[str],
         log.warning("the stricter SfM run failed (%s); keeping the first", e.message)
         runs.append({"matching": "neighbours, strict", "failed": e.message})
         return kept
-    checks2 = checks_of(posed2, rec2, retry_work / SFM_DATABASE, order, order_by, config)
+    checks2 = checks_of(posed2, retry_work / SFM_DATABASE, order, order_by, config)
     runs.append(_run_summary("neighbours, strict", posed2, checks2))
     if _undoubted(posed2, checks2) > _undoubted(posed, checks):
         log.info("the stricter SfM run is kept: %d photos registered, %d doubted (first run: %d, %d)",

@@ -90,25 +90,29 @@ def occluder_evidence(view: View, others: Sequence[View], opts: SegmentOptions) 
         return np.zeros(view.shape, bool), np.zeros(view.shape, bool)
     cost, beyond, box = found
     whole_window = cv2.erode((beyond < opts.sweep_threshold).astype(np.uint8), np.ones((WINDOW, WINDOW), np.uint8))
-    return (_matched(view, cost, box, opts.sweep_threshold, opts),
-            _textured(view, whole_window > 0, box, opts))
+    usable = _usable(view, box, opts)
+    return _in_box(view, cost < opts.sweep_threshold, box) & usable, _in_box(view, whole_window > 0, box) & usable
 
 
 def _matched(view: View, cost: np.ndarray, box: tuple[int, int, int, int], threshold: float,
              opts: SegmentOptions) -> np.ndarray:
-    """``(H, W)`` bool: the pixels of ``box`` whose sweep ``cost`` is under ``threshold``, textured and away from
-    clipped highlights (a highlight's outline can match at a wrong depth; it is never evidence)."""
-    return _textured(view, cost < threshold, box, opts)
+    """``(H, W)`` bool: the pixels of ``box`` whose sweep ``cost`` is under ``threshold`` and :func:`_usable`."""
+    return _in_box(view, cost < threshold, box) & _usable(view, box, opts)
 
 
-def _textured(view: View, explained: np.ndarray, box: tuple[int, int, int, int], opts: SegmentOptions
-              ) -> np.ndarray:
-    """``(H, W)`` bool: the ``explained`` pixels of ``box`` (``(h, w)`` bool over it) that are textured and away
-    from clipped highlights (see :func:`_matched`)."""
+def _in_box(view: View, inside: np.ndarray, box: tuple[int, int, int, int]) -> np.ndarray:
+    """``(H, W)`` bool: ``inside`` (``(h, w)`` bool over ``box``) placed in the view, False elsewhere."""
     x0, y0, x1, y1 = box
     out = np.zeros(view.shape, bool)
-    textured = local_contrast(view.image[y0:y1, x0:x1]) > opts.texture_threshold
-    out[y0:y1, x0:x1] = explained & textured
+    out[y0:y1, x0:x1] = inside
+    return out
+
+
+def _usable(view: View, box: tuple[int, int, int, int], opts: SegmentOptions) -> np.ndarray:
+    """``(H, W)`` bool: the pixels of ``box`` that are textured and away from clipped highlights (a highlight's
+    outline can match at a wrong depth; it is never evidence)."""
+    x0, y0, x1, y1 = box
+    out = _in_box(view, local_contrast(view.image[y0:y1, x0:x1]) > opts.texture_threshold, box)
     if view.clipped is not None:
         out &= ~(cv2.dilate(view.clipped.astype(np.uint8), disc(2)) > 0)
     return out

@@ -89,7 +89,7 @@ def test_a_lower_sift_peak_threshold_finds_features_in_faint_texture():
     faint = (120 + 4 * (texture - texture.mean()) / texture.std()).clip(0, 255).astype(np.uint8)  # std 4 levels
 
     def features(peak: float) -> int:
-        options = extraction_options(PosesConfig(sift_peak_threshold=peak), threads=1)
+        options = extraction_options(PosesConfig(sift_peak_threshold=peak), threads=1, affine_shape=False)
         assert options.sift.peak_threshold == peak
         sift = pycolmap.FeatureExtractor.create(options, pycolmap.Device.cpu)
         return len(sift.extract_from_uint8_array(faint)[0])

@@ -638,7 +638,7 @@ def test_photos_left_without_a_camera_get_one_in_the_relaxed_pass(sfm_sphere_dec
     names = sorted(p.stem for p in images.glob("*.png"))
     pycolmap.Database.open(db).close()
     extract_features(db, images, [CameraGroup(tuple(names), "SIMPLE_RADIAL", None, "COLMAP's guess")],
-                     extraction_options(config, 2))
+                     extraction_options(config, 2, affine_shape=False))
     match_features(db, names, tmp_path, config, 2)
     (tmp_path / "full").mkdir()
     full = largest_first(pycolmap.incremental_mapping(db, images, tmp_path / "full",
