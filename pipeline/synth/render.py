@@ -270,8 +270,7 @@ _LIGHT_PLANE_TOLERANCE = 1e-3
 def on_lights(position: np.ndarray, lights) -> np.ndarray:
     """``(H, W)`` bool: pixel-centre hits ``(H, W, 3)`` lying on one of the rectangular lights.
 
-    Found from geometry rather than from the shape-index AOV: Mitsuba loads shapes on several threads, so
-    the shape order (and with it the index of each light) can differ between two loads of the same scene.
+    Found from geometry rather than from the shape-index AOV: it needs no bookkeeping of each light's index.
     """
     hit = np.zeros(position.shape[:2], dtype=bool)
     for light in lights:
