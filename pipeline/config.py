@@ -165,6 +165,13 @@ class PosesConfig(StrictModel):
     relaxed_min_inlier_ratio: float = Field(
         0.1, gt=0, le=1, description="...and this share of its 2D-3D matches as inliers (COLMAP's bar: 0.25)."
     )
+    relaxed_min_model: int = Field(
+        10, ge=2, description="the relaxed pass extends only a model of at least this many photos (or half the "
+        "photos, when fewer): a model of a few photos has few, poorly triangulated points and a lens fitted to "
+        "them, and photos registered against it on 15 matches follow it wherever it is wrong (a 2-photo model of a "
+        "plain room grew to 9 photos 5.7 degrees off the truth, its focal length 20 times the EXIF one). COLMAP "
+        "itself keeps no model under 10 photos by default."
+    )
     max_image_size: int = Field(
         1600, ge=0, description="SIFT runs on images downscaled to this longest side (0: full size)."
     )
@@ -251,6 +258,16 @@ class PosesConfig(StrictModel):
     min_support_points: int = Field(
         15, ge=0, description="a registered photo in which fewer of the final model's 3D points are seen is doubted: "
         "its camera rests on too little (the relaxed pass's own bar for registering one; 0: no check)."
+    )
+    focal_warn_ratio: float = Field(
+        1.25, gt=1, description="warn when a camera's fitted focal length differs from its EXIF (or calibration) prior "
+        "by more than this factor either way: the right models measured stay within 1.07 (the blowtorch's lens "
+        "against its EXIF), the wrong ones of plain rooms were 1.4-1.6 off. Cropped photos that kept their EXIF "
+        "also differ (a 3:2 photo cropped square: 1.5), hence a warning."
+    )
+    max_focal_ratio: float = Field(
+        2.5, gt=1, description="above this factor between the fitted focal length and its prior, every photo of "
+        "that camera is doubted (a degenerate model: 20x measured; a crop of a 16:9 photo to a square is 1.78)."
     )
     up_max_deg: float = Field(
         10.0, gt=0, le=90, description="warn when the plane under the object (RANSAC on the sparse points) is tilted "

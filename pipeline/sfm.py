@@ -315,7 +315,8 @@ def run_sfm(
             ranked, mapper = found, "global"
     # not in a retry: that one is for photos placed where others look the same, and wants stricter bars, not laxer
     relaxed = None
-    if ranked and ranked[0].num_reg_images() < len(names) and config.relaxed_min_inliers and retry is None:
+    if (ranked and ranked[0].num_reg_images() < len(names) and config.relaxed_min_inliers and retry is None
+            and not too_small_to_extend(ranked[0].num_reg_images(), len(names), config)):
         more = continued(db_path, image_dir, work / "sparse_relaxed", ranked[0],
                          relaxed_options(_mapper_options(config, groups, threads, len(names)), config))[0]
         relaxed = sorted(registered_stems(more) - registered_stems(ranked[0]))
@@ -468,6 +469,16 @@ def _mapper_options(config: PosesConfig, groups: Sequence[CameraGroup], threads:
 def registered_stems(rec: pycolmap.Reconstruction) -> set[str]:
     """The image stems of a model's photos that have a camera."""
     return {stem_of(im.name) for im in rec.images.values() if im.has_pose}
+
+
+def too_small_to_extend(size: int, total: int, config: PosesConfig) -> bool:
+    """Whether a model of ``size`` photos is under ``poses.relaxed_min_model`` (or half the ``total`` photos, when
+    fewer), so that the relaxed pass leaves it as it is (said in the log)."""
+    needed = min(config.relaxed_min_model, int(np.ceil(total / 2)))
+    if size < needed:
+        log.info("the relaxed pass is skipped: the model holds %d photos, fewer than the %d it needs to extend "
+                 "one (poses.relaxed_min_model)", size, needed)
+    return size < needed
 
 
 def relaxed_options(options: Any, config: PosesConfig) -> Any:
@@ -793,6 +804,7 @@ def posed_from_sfm(decoded: DecodeArtifacts, names: list[str], calibration: tupl
                      "max": max(sfm.features.values()), "per_image": dict(sorted(sfm.features.items()))},
         "camera_groups": [{"photos": len(g.names), "model": g.model, "intrinsics_from": g.source, "fixed": g.fixed}
                           for g in groups],
+        "focal_prior_px": {n: None if g.params is None else g.params[0] for g in groups for n in g.names},
         "seconds": {k: round(v, 2) for k, v in sfm.seconds.items()},
         "not_registered_why": sfm.unregistered,
         "relaxed_pass": None if sfm.relaxed is None else {
@@ -968,16 +980,18 @@ def consecutive_matches(db_path: Path, order: Sequence[str]) -> np.ndarray:
 
 def checks_of(posed: Posed, db_path: Path, order: Sequence[str], order_by: str, config: PosesConfig) -> PoseChecks:
     """:func:`pipeline.pose_checks.check_poses` on the registered photos of one run (``order``: all photos'
-    stems in capture order; each photo's support: its model's ``observations_per_image``)."""
+    stems in capture order; each photo's support: its model's ``observations_per_image``; its focal length's
+    prior: ``focal_prior_px``)."""
     from .undistort import pinholes
 
     index = {n: i for i, n in enumerate(posed.names)}
     registered = [n for n in order if n in index]
     K, sizes = pinholes(posed.lens)
-    observed = posed.stats["observations_per_image"]
+    observed, prior = posed.stats["observations_per_image"], posed.stats["focal_prior_px"]
     return check_poses(posed.names, posed.c2w, K, sizes, consecutive_matches(db_path, registered),
                        np.array([index[n] for n in registered], int), order_by, posed.points, config,
-                       np.array([observed[n] for n in posed.names]))
+                       np.array([observed[n] for n in posed.names]),
+                       np.array([np.nan if prior[n] is None else prior[n] for n in posed.names]))
 
 
 def posed_from_sfm_checked(decoded: DecodeArtifacts, names: list[str],
@@ -1032,7 +1046,7 @@ def act_on_suspects(posed: Posed, checks: PoseChecks, total: int, config: PosesC
     """
     if not checks.flagged:
         return posed
-    for line in checks.warnings():
+    for line in checks.photo_warnings():
         log.warning("doubtful pose: %s", line)
     shown = ", ".join(checks.flagged[:20]) + (" ..." if len(checks.flagged) > 20 else "")
     fix = ("look at poses.png and poses_report.json (checks); " + FIX_OVERLAP + "; or set poses.on_suspect=drop "

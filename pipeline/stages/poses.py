@@ -352,12 +352,12 @@ def _unplaced(source: str) -> str:
 
 def _checks_report(checks: PoseChecks, runs: list[dict[str, Any]], posed: Posed, K: np.ndarray, sizes: np.ndarray,
                    sphere: ObjectSphere, config: PosesConfig) -> dict[str, Any]:
-    """The pose checks for the report, the up check redone on the cameras kept and the frame's own up; its
-    warning logged."""
+    """The pose checks for the report, the up check redone on the cameras kept and the frame's own up; the
+    warnings about the model as a whole (up, focal length) logged."""
     if posed.points is not None:
         checks.up = frame_up_check(posed.points, posed.c2w, K, sizes, sphere.up, sphere.center, config)
-    if checks.up is not None and checks.up.warning():
-        log.warning("%s", checks.up.warning())
+    for line in checks.frame_warnings():
+        log.warning("%s", line)
     kept = set(posed.names)
     return {**checks.to_json(), "on_suspect": config.on_suspect, "runs": runs,
             "dropped": [n for n in checks.flagged if n not in kept]}

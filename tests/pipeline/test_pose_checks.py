@@ -16,6 +16,7 @@ from pipeline.pose_checks import (
     check_poses,
     consistent_path,
     far_cameras,
+    focal_checks,
     path_jumps,
     up_check,
     weak_support,
@@ -213,6 +214,34 @@ def test_a_camera_few_points_support_is_flagged_however_right_it_looks():
     off = CONFIG.model_copy(update={"min_support_points": 0})
     assert check_poses(names, c2w, K, sizes, steady_matches(n), np.arange(n), "file name", None, off,
                        support).flagged == []
+
+
+def test_a_focal_length_far_from_its_exif_warns_and_beyond_the_limit_doubts_every_photo_of_that_lens():
+    """The orbit's lens (F px) against priors: 7 % off (the blowtorch's EXIF) passes; 1.5 off (a crop, or a model
+    wrong as a whole) warns and keeps the photos; 20 times off (the degenerate 2-photo model) doubts every photo
+    of that lens and no other; photos without a prior are not checked."""
+    c2w = orbit()
+    n = len(c2w)
+    K, sizes = intrinsics(n)
+    names = names_of(n)
+
+    def checked(prior: np.ndarray):
+        return check_poses(names, c2w, K, sizes, steady_matches(n), np.arange(n), "file name", None, CONFIG,
+                           focal_prior=prior)
+
+    close = checked(np.full(n, F / 1.07))
+    assert close.flagged == [] and close.warnings() == [] and close.focal[0].photos == n
+    cropped = checked(np.full(n, F / 1.5))
+    assert cropped.flagged == [] and len(cropped.warnings()) == 1
+    assert "1.50 times off" in cropped.warnings()[0] and "poses.focal_warn_ratio" in cropped.warnings()[0]
+    two_lenses = np.where(np.arange(n) < 10, F * 20, F)
+    degenerate = checked(two_lenses)
+    assert degenerate.flagged == names[:10] and {s.check for s in degenerate.suspects} == {"focal"}
+    assert "poses.max_focal_ratio" in degenerate.suspects[0].reason
+    report = degenerate.to_json()
+    assert sorted((f["photos"], round(f["ratio"], 3)) for f in report["focal"]) == [(10, 20.0), (n - 10, 1.0)]
+    assert checked(np.full(n, np.nan)).focal == [] and checked(np.full(n, np.nan)).flagged == []
+    assert focal_checks(names, np.full(n, F), np.full(n, F * 2.4), 1.25, 2.5)[0] == []
 
 
 def test_axes_of_a_forward_facing_capture_are_not_checked():
