@@ -373,7 +373,8 @@ def test_tiled_room_poses_are_right_or_flagged(tiles_capture, tmp_path):
     centre = compare_poses(est, ref).center / float(np.median(np.linalg.norm(ref[:, :3, 3], axis=1)))
     # Every camera the stage keeps is in its place; a misplaced one would have to be among those it dropped. A
     # photo registered where a look-alike was taken is off by at least the ring's step (360/32 = 11 degrees);
-    # the tiles cost precision, not places: 0.4 degrees median, single photos up to 2-3 (render to render).
+    # the tiles cost precision, not places: 0.55 degrees median, single photos up to 1.6 (before renders
+    # were repeatable, other noise gave 0.5-1.2 median, 1.5-3.3 at worst).
     assert np.median(rotation_deg) < 1.0, np.median(rotation_deg)
     assert rotation_deg.max() < RING_STEP_DEG / 2 and centre.max() < 0.05, (rotation_deg.max(), centre.max(),
                                                                            checks["flagged"])
