@@ -356,8 +356,9 @@ def focal_checks(names: Sequence[str], focal: np.ndarray, prior: np.ndarray, war
     ratio = np.where(known, np.maximum(focal / prior, prior / focal), 1.0)
     suspects = [Suspect(names[i], "focal", float(ratio[i]), limit_ratio,
                         f"its lens was fitted a focal length of {focal[i]:.0f} px, {ratio[i]:.1f} times off the "
-                        f"{prior[i]:.0f} px of its EXIF (more than poses.max_focal_ratio={limit_ratio:g}): the "
-                        "model is degenerate") for i in np.flatnonzero(ratio > limit_ratio)]
+                        f"{prior[i]:.0f} px of its EXIF or calibration (more than "
+                        f"poses.max_focal_ratio={limit_ratio:g}): the model is degenerate")
+                for i in np.flatnonzero(ratio > limit_ratio)]
     return suspects, checks
 
 
