@@ -262,12 +262,9 @@ class PosesConfig(StrictModel):
     focal_warn_ratio: float = Field(
         1.25, gt=1, description="warn when a camera's fitted focal length differs from its EXIF (or calibration) prior "
         "by more than this factor either way: the right models measured stay within 1.07 (the blowtorch's lens "
-        "against its EXIF), the wrong ones of plain rooms were 1.4-1.6 off. Cropped photos that kept their EXIF "
-        "also differ (a 3:2 photo cropped square: 1.5), hence a warning."
-    )
-    max_focal_ratio: float = Field(
-        2.5, gt=1, description="above this factor between the fitted focal length and its prior, every photo of "
-        "that camera is doubted (a degenerate model: 20x measured; a crop of a 16:9 photo to a square is 1.78)."
+        "against its EXIF), partial models of plain rooms were 1.4-1.6 off and a degenerate one 20x. A warning, not "
+        "a doubt: photos cropped after they were taken keep their EXIF and are as far off with a right model (a 3:2 "
+        "photo cropped square: 1.5; a crop to the object a third as wide: 3)."
     )
     up_max_deg: float = Field(
         10.0, gt=0, le=90, description="warn when the plane under the object (RANSAC on the sparse points) is tilted "

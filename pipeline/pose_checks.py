@@ -35,8 +35,10 @@ figure and a reason a person can read:
    2-photo model, extended by the relaxed pass, fitted a focal length 20 times the EXIF one and placed 9
    photos 5.7 degrees off; partial models of other plain rooms were 1.4-1.6 off, every right model measured
    within 1.07 (the blowtorch's lens against its EXIF; the synthetic captures' within 0.01). Beyond
-   ``poses.focal_warn_ratio`` either way it warns (cropped photos that kept their EXIF differ too: 1.5 for a
-   3:2 photo cropped square); beyond ``poses.max_focal_ratio`` every photo of that lens is doubted.
+   ``poses.focal_warn_ratio`` either way it warns about the model as a whole, and doubts no photo: photos
+   cropped after they were taken keep their EXIF and are as far off with a right model (1.5 for a 3:2 photo
+   cropped square, 3 for a crop to an object a third as wide), and the models measured that far off were
+   partial ones, which ``poses.min_registered_fraction`` stops.
 
 :func:`check_poses` runs them all (the up check on the cameras it is given) and returns a :class:`PoseChecks`
 for ``poses_report.json``. Arrays only; no files, no pycolmap.
@@ -71,9 +73,9 @@ class Suspect:
     """One photo whose pose a check doubts."""
 
     name: str
-    check: str  # "path_jump" | "axis_miss" | "looks_away" | "far_out" | "weak_support" | "focal"
+    check: str  # "path_jump" | "axis_miss" | "looks_away" | "far_out" | "weak_support"
     value: float  # the measured figure: step / median step (path_jump), degrees off the axis (axis_miss,
-    # looks_away), distance / median distance (far_out), observations (weak_support), factor off the prior (focal)
+    # looks_away), distance / median distance (far_out), observations (weak_support)
     limit: float  # the threshold it exceeded, same unit
     reason: str
 
@@ -108,7 +110,6 @@ class FocalCheck:
     fitted_px: float
     prior_px: float
     warn_ratio: float
-    limit_ratio: float
 
     @property
     def ratio(self) -> float:
@@ -121,7 +122,7 @@ class FocalCheck:
         return (f"the focal length fitted to {self.photos} photo(s) is {self.fitted_px:.0f} px, {self.ratio:.2f} "
                 f"times off the {self.prior_px:.0f} px their EXIF (or calibration) gives (more than "
                 f"poses.focal_warn_ratio={self.warn_ratio:g}): unless the photos were cropped after they were taken, "
-                "the model is wrong as a whole (too few photos overlap)")
+                "the model is wrong as a whole (too few photos overlap); check poses.png")
 
 
 @dataclass
@@ -338,28 +339,14 @@ def weak_support(names: Sequence[str], support: np.ndarray, min_points: int) -> 
             for i in np.flatnonzero(np.asarray(support) < min_points)]
 
 
-def focal_checks(names: Sequence[str], focal: np.ndarray, prior: np.ndarray, warn_ratio: float,
-                 limit_ratio: float) -> tuple[list[Suspect], list[FocalCheck]]:
-    """Each lens's fitted focal length against its prior (see the module doc).
-
-    Args:
-        focal: ``(N,)`` fitted focal lengths in pixels; prior: ``(N,)`` the priors, NaN where there is none.
-
-    Returns:
-        the photos beyond ``limit_ratio``, and one :class:`FocalCheck` per distinct (fitted, prior) pair.
-    """
+def focal_checks(focal: np.ndarray, prior: np.ndarray, warn_ratio: float) -> list[FocalCheck]:
+    """One :class:`FocalCheck` per lens: per distinct (fitted, prior) pair of ``focal`` ``(N,)`` (fitted focal
+    lengths in pixels) and ``prior`` ``(N,)`` (NaN where there is none: not checked). See the module doc."""
     focal, prior = np.asarray(focal, float), np.asarray(prior, float)
     known = np.isfinite(prior)
     pairs = np.unique(np.stack([focal[known], prior[known]], axis=1), axis=0)
-    checks = [FocalCheck(int(np.sum(known & (focal == f) & (prior == p))), float(f), float(p), warn_ratio, limit_ratio)
-              for f, p in pairs]
-    ratio = np.where(known, np.maximum(focal / prior, prior / focal), 1.0)
-    suspects = [Suspect(names[i], "focal", float(ratio[i]), limit_ratio,
-                        f"its lens was fitted a focal length of {focal[i]:.0f} px, {ratio[i]:.1f} times off the "
-                        f"{prior[i]:.0f} px of its EXIF or calibration (more than "
-                        f"poses.max_focal_ratio={limit_ratio:g}): the model is degenerate")
-                for i in np.flatnonzero(ratio > limit_ratio)]
-    return suspects, checks
+    return [FocalCheck(int(np.sum(known & (focal == f) & (prior == p))), float(f), float(p), warn_ratio)
+            for f, p in pairs]
 
 
 # ----------------------------------------------------------------------------------------------------- up
@@ -403,8 +390,7 @@ def check_poses(names: Sequence[str], c2w: np.ndarray, K: np.ndarray, sizes: np.
         order: ``(N,)`` indices into ``names`` in capture order (:func:`capture_order`), ``order_by`` what set it.
         points: ``(M, 3)`` sparse points, or None (no up check).
         config: the thresholds (``jump_ratio``, ``jump_min_match_share``, ``axis_miss_mads``, ``object_window``,
-            ``distance_ratio``, ``min_support_points``, ``focal_warn_ratio``, ``max_focal_ratio``, ``up_max_deg``,
-            ``seed``).
+            ``distance_ratio``, ``min_support_points``, ``focal_warn_ratio``, ``up_max_deg``, ``seed``).
         support: ``(N,)`` observations of 3D points in each photo, or None (no support check: cameras not from SfM).
         focal_prior: ``(N,)`` each photo's prior focal length in pixels (NaN: none), or None (no focal check).
     """
@@ -419,11 +405,9 @@ def check_poses(names: Sequence[str], c2w: np.ndarray, K: np.ndarray, sizes: np.
     if len(names) >= MIN_AXES and conditioning >= PARALLEL_AXES:  # else no point to measure distances from
         far, checks.median_distance = far_cameras(names, c2w[:, :3, 3], center, config.distance_ratio)
     weak = [] if support is None else weak_support(names, support, config.min_support_points)
-    lens = []
+    checks.suspects = jumps + misses + far + weak
     if focal_prior is not None:
-        lens, checks.focal = focal_checks(names, K[:, 0, 0], focal_prior, config.focal_warn_ratio,
-                                          config.max_focal_ratio)
-    checks.suspects = jumps + misses + far + weak + lens
+        checks.focal = focal_checks(K[:, 0, 0], focal_prior, config.focal_warn_ratio)
     checks.notes += [note] if note else []
     if points is not None:
         checks.up = frame_up_check(points, c2w, K, sizes, camera_up(c2w), center, config)
