@@ -315,8 +315,12 @@ def run_sfm(
             ranked, mapper = found, "global"
     # not in a retry: that one is for photos placed where others look the same, and wants stricter bars, not laxer
     relaxed = None
-    if (ranked and ranked[0].num_reg_images() < len(names) and config.relaxed_min_inliers and retry is None
-            and not too_small_to_extend(ranked[0].num_reg_images(), len(names), config)):
+    extend = ranked and ranked[0].num_reg_images() < len(names) and config.relaxed_min_inliers and retry is None
+    needed = relaxed_min_size(len(names), config)
+    if extend and ranked[0].num_reg_images() < needed:
+        log.info("the relaxed pass is skipped: the model holds %d photos, fewer than the %d it needs to extend one "
+                 "(poses.relaxed_min_model)", ranked[0].num_reg_images(), needed)
+    elif extend:
         more = continued(db_path, image_dir, work / "sparse_relaxed", ranked[0],
                          relaxed_options(_mapper_options(config, groups, threads, len(names)), config))[0]
         relaxed = sorted(registered_stems(more) - registered_stems(ranked[0]))
@@ -471,14 +475,10 @@ def registered_stems(rec: pycolmap.Reconstruction) -> set[str]:
     return {stem_of(im.name) for im in rec.images.values() if im.has_pose}
 
 
-def too_small_to_extend(size: int, total: int, config: PosesConfig) -> bool:
-    """Whether a model of ``size`` photos is under ``poses.relaxed_min_model`` (or half the ``total`` photos, when
-    fewer), so that the relaxed pass leaves it as it is (said in the log)."""
-    needed = min(config.relaxed_min_model, int(np.ceil(total / 2)))
-    if size < needed:
-        log.info("the relaxed pass is skipped: the model holds %d photos, fewer than the %d it needs to extend "
-                 "one (poses.relaxed_min_model)", size, needed)
-    return size < needed
+def relaxed_min_size(total: int, config: PosesConfig) -> int:
+    """The fewest photos a model of a ``total``-photo capture must hold for the relaxed pass to extend it:
+    ``poses.relaxed_min_model``, or half the photos when fewer."""
+    return min(config.relaxed_min_model, int(np.ceil(total / 2)))
 
 
 def relaxed_options(options: Any, config: PosesConfig) -> Any:

@@ -616,13 +616,13 @@ def test_cli_writes_results_next_to_decode(tiny_capture, tiny_decode, tmp_path, 
 def test_the_relaxed_pass_extends_only_a_model_of_enough_photos():
     """A model of a few photos is not extended on lowered bars: 2 of 40 (the plain room whose 2-photo model grew
     to 9 photos 5.7 degrees off) is left alone, 10 of 40 is extended; a small capture needs half its photos."""
-    from pipeline.sfm import too_small_to_extend
+    from pipeline.sfm import relaxed_min_size
 
     config = PosesConfig()
-    assert too_small_to_extend(2, 40, config) and too_small_to_extend(9, 40, config)
-    assert not too_small_to_extend(10, 40, config) and not too_small_to_extend(53, 67, config)
-    assert too_small_to_extend(5, 12, config) and not too_small_to_extend(6, 12, config)
-    assert not too_small_to_extend(2, 40, config.model_copy(update={"relaxed_min_model": 2}))
+    assert 2 < relaxed_min_size(40, config) and 9 < relaxed_min_size(40, config)
+    assert 10 >= relaxed_min_size(40, config) and 53 >= relaxed_min_size(67, config)
+    assert 5 < relaxed_min_size(12, config) and 6 >= relaxed_min_size(12, config)
+    assert 2 >= relaxed_min_size(40, config.model_copy(update={"relaxed_min_model": 2}))
 
 
 @pytest.mark.slow
