@@ -383,6 +383,22 @@ class MasksConfig(StrictModel):
         "docs/masks.md). Not in the sphere prior's probes. None: off"
     )
     trim_colour_bins: int = Field(16, ge=2, le=64, description="...colour histograms with this many bins per channel")
+    outline_reach_px: int = Field(
+        2, ge=0, description="last, each pixel on either side of a mask's outline goes to the side that covers most "
+        "of it: its colour read as a mix (in linear light) of the sure object's and the sure background's within "
+        "this many pixels (pipeline.masking.outline; GrabCut's cut falls on either side of a mixed pixel, most of a "
+        "small object's error at 320x240). 0: off"
+    )
+    outline_contrast: float = Field(
+        0.1, ge=0, description="...only where the two colours differ by at least this (linear, RMS over the channels)"
+    )
+    outline_margin: float = Field(
+        0.1, ge=0, lt=0.5, description="...and the pixel's share of the object's colour is beyond one half by this"
+    )
+    outline_residual: float = Field(
+        0.5, gt=0, description="...and the pixel's colour lies within this share of the two colours' difference of "
+        "the line between them (a highlight, texture or a shaded rim is no mix of the two)"
+    )
     trim_seen_through_votes: float = Field(
         0.75, gt=0, description="...a pixel may be trimmed where every voxel its ray crosses in the hull has at "
         "least this many background votes (0.75: one view's, not a dark pixel's doubtful half vote). Higher: "

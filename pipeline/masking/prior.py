@@ -77,9 +77,9 @@ def probe_options(opts: SegmentOptions) -> SegmentOptions:
     """The cheap segmentation a probe runs: the sphere prior and one round of carving, no floor, no sweeps, no
     colour trim (a probe asks how far the object reaches; trimmed there too, the sphere moved and the blowtorch's
     every sixth photo scored 0.842 / 0.728, median / worst view, against 0.878 / 0.763 trimmed in the final masks
-    alone and 0.836 / 0.750 with no trim)."""
+    alone and 0.836 / 0.750 with no trim), no outline to the pixel (a pixel more or less says nothing of that)."""
     return replace(opts, rounds=1, floor=False, sweep=False, front_sweep=False, through_floor=False,
-                   trim_colour_log_odds=None)
+                   trim_colour_log_odds=None, outline_reach_px=0)
 
 
 def framed_options(opts: SegmentOptions, radius: float) -> SegmentOptions:

@@ -26,6 +26,7 @@ from .hull import (
     stand_on_plane,
     voxel_pixels,
 )
+from .outline import snap_outline
 from .parallel import MapViews, serial
 from .support_plane import find_support_plane, floor_evidence
 from .sweeps import floor_through_hull, front_evidence, occluded_region, occluder_evidence
@@ -495,4 +496,8 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
         final = trim_room_colours([v.image for v in views], final, trimmable, opts.trim_colour_bins,
                                   opts.trim_colour_log_odds, opts.colour_open_px, opts.trim_core_px,
                                   opts.trim_band_px, opts.colour_min_pixels)
+    if opts.outline_reach_px > 0:
+        final = [m if i in fixed else snap_outline(views[i].image, m, opts.outline_reach_px, opts.outline_contrast,
+                                                   opts.outline_margin, opts.outline_residual, backgrounds[i])
+                 for i, m in enumerate(final)]
     return Segmentation(final, masks, hulls, floors, occluded, plane, volume, rounds, evidence.track_labels)

@@ -91,6 +91,10 @@ class SegmentOptions:
     trim_band_px: tuple[int, int] = (3, 18)
     trim_seen_through_votes: float = 0.75
     band_px: int = 4
+    outline_reach_px: int = 2
+    outline_contrast: float = 0.1
+    outline_margin: float = 0.1
+    outline_residual: float = 0.5
     neighbours: int = 6
     neighbour_max_deg: float = 60.0
     consistency_rank: int = 3
