@@ -91,14 +91,15 @@ def render_environment_image(
 ) -> dict[str, torch.Tensor]:
     """Render the environment field alone (object absent) from any camera: ``rgb`` ``(H, W, 3)`` and
     z-depth ``depth`` ``(H, W)`` along the camera's optical axis (``chunk``: rays at a time, by default
-    :func:`environment_chunk`'s)."""
+    :func:`environment_chunk`'s), both traced with the spec's samples for a depth (``RenderSpec.for_depth``)."""
     origins, dirs, radii = image_rays(K, c2w, height, width)
     chunk = chunk or environment_chunk(origins.device)
     axis = c2w[:3, 2]
+    spec = model.spec.render.for_depth()
     rgbs, depths = [], []
     for i in range(0, origins.shape[0], chunk):
         sl = slice(i, i + chunk)
-        rgb, depth = model.environment(origins[sl], dirs[sl], radii[sl])
+        rgb, depth = model.environment(origins[sl], dirs[sl], radii[sl], render=spec)
         rgbs.append(rgb)
         depths.append(depth * (dirs[sl] * axis).sum(-1))
     return {"rgb": torch.cat(rgbs).reshape(height, width, 3), "depth": torch.cat(depths).reshape(height, width)}

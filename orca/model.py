@@ -99,14 +99,16 @@ class OrcaModel(nn.Module):
         )
 
     def environment(
-        self, origins: torch.Tensor, dirs: torch.Tensor, radii: torch.Tensor, near: torch.Tensor | None = None
+        self, origins: torch.Tensor, dirs: torch.Tensor, radii: torch.Tensor, near: torch.Tensor | None = None,
+        render: RenderSpec | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """Radiance ``(N, 3)`` and ray depth ``(N,)`` (at ``spec.render.depth_quantile``) of the environment
         field alone (object absent), seen by ordinary camera cones from ``origins``, empty before ``near``
-        ``(N,)`` (default 0). The object's inside is empty (see ``solid``)."""
+        ``(N,)`` (default 0), traced as ``render`` says (default: ``spec.render``; a depth wants
+        :meth:`RenderSpec.for_depth`). The object's inside is empty (see ``solid``)."""
         near = torch.zeros_like(radii) if near is None else near
         rgb, depth, _, _ = render_environment_along(
-            self.env_field, origins, dirs, radii, near, self.spec.render, self.solid
+            self.env_field, origins, dirs, radii, near, render or self.spec.render, self.solid
         )
         depth = near + depth
         return rgb, depth

@@ -717,8 +717,10 @@ class RenderConfig(StrictModel):
     env_samples: int = Field(48, ge=4, description="coarse samples along each virtual cone (log-spaced)")
     env_fine: int = Field(32, ge=0, description="more samples from the coarse pass's weights (0: one pass)")
     env_fine_render: int = Field(
-        128, ge=0, description="env_fine when a trained model renders (evaluate, export, render): one fixed set of "
-        "samples per view, where training draws new ones every step; too few step through thin props"
+        128, ge=0, description="env_fine when a trained model renders the environment's views and depth (evaluate, "
+        "export, render): one fixed set of samples per view, where training draws new ones every step, and too few "
+        "step through thin props to the wall behind. The object's colour and the background of a photo's render "
+        "use env_fine, the estimate the model was fitted to"
     )
     depth_quantile: float = Field(
         0.3, gt=0, lt=1, description="an environment ray's depth (export, evaluate, render): where its accumulated "

@@ -141,7 +141,8 @@ def render_panorama(model, width: int, height: int, centre: np.ndarray, frame: n
                     chunk: int | None = None, bar=None, task=None) -> dict[str, np.ndarray]:
     """The environment field from ``centre`` as an equirectangular panorama: ``rgb`` ``(H, W, 3)`` linear and
     ``depth`` ``(H, W)``, the distance along each ray at the model's ``spec.render.depth_quantile`` of its
-    weight (:func:`orca.volume.quantile_depth`); ``chunk`` rays at a time (default: the device's,
+    weight (:func:`orca.volume.quantile_depth`), both traced with the samples for a depth
+    (``RenderSpec.for_depth``); ``chunk`` rays at a time (default: the device's,
     :func:`orca.imaging.environment_chunk`)."""
     import torch
 
@@ -151,10 +152,12 @@ def render_panorama(model, width: int, height: int, centre: np.ndarray, frame: n
     chunk = chunk or environment_chunk(device)
     origins, dirs, radii = (torch.as_tensor(np.ascontiguousarray(a), dtype=torch.float32, device=device)
                             for a in equirect_rays(width, height, centre, frame))
+    spec = model.spec.render.for_depth()
     rgbs, depths = [], []
     with torch.no_grad():
         for i in range(0, origins.shape[0], chunk):
-            rgb, depth = model.environment(origins[i : i + chunk], dirs[i : i + chunk], radii[i : i + chunk])
+            rgb, depth = model.environment(origins[i : i + chunk], dirs[i : i + chunk], radii[i : i + chunk],
+                                           render=spec)
             rgbs.append(rgb.float().cpu())
             depths.append(depth.float().cpu())
             if bar is not None:

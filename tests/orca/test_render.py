@@ -209,16 +209,18 @@ def test_training_cones_jitter_their_coarse_edges_so_no_space_goes_unseen():
     assert (seen_jittered[:, 0] > 0.9).float().mean() > 0.1, "jittered edges see it on some rays"
 
 
-def test_a_trained_model_renders_deterministically_with_its_own_fine_samples():
+def test_a_trained_model_renders_colour_with_training_samples_and_depth_with_more():
     from dataclasses import replace
 
     spec = RenderSpec(env_samples=16, env_fine=8, env_fine_render=32)
     rendering = spec.for_rendering()
-    assert rendering.deterministic and rendering.env_fine == 32
+    assert rendering.deterministic and rendering.env_fine == 8  # the estimate the model was fitted to
     assert rendering.shade_min_opacity == spec.shade_min_opacity_render > 0  # no cones beside the object
     # nothing else changes
-    assert replace(rendering, deterministic=False, env_fine=8, shade_min_opacity=spec.shade_min_opacity) == spec
-    assert RenderSpec(env_fine=8).for_rendering().env_fine == 8  # no render count: training's
+    assert replace(rendering, deterministic=False, shade_min_opacity=spec.shade_min_opacity) == spec
+    depth = rendering.for_depth()
+    assert depth.env_fine == 32 and replace(depth, env_fine=8) == rendering
+    assert RenderSpec(env_fine=8).for_depth().env_fine == 8  # no render count: training's
 
 
 class _Fog(AnalyticEnvironment):
