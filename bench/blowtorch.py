@@ -258,6 +258,13 @@ def commit() -> str:
                                                   else "")
 
 
+def append_record(path: Path, record: dict[str, Any]) -> None:
+    """``record`` appended to the JSON-lines file ``path`` (its folder made if missing): every bench's record."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a", encoding="utf-8") as f:
+        f.write(json.dumps(record) + "\n")
+
+
 def poses_undistortion(results: Path) -> UndistortMaps | None:
     """How the poses stage in ``results/`` resampled the photos (its ``undistorted/`` folder), or None."""
     undistorted = results / POSES / UNDISTORTED
@@ -347,9 +354,7 @@ def main() -> None:
         if failed:
             print(f"\n{failed[0].stage} failed:\n" + "\n".join(record["failed"]["log_tail"]))
         if not args.no_record:
-            args.results.parent.mkdir(parents=True, exist_ok=True)
-            with open(args.results, "a", encoding="utf-8") as f:
-                f.write(json.dumps(record) + "\n")
+            append_record(args.results, record)
         if args.work is not None:
             print(f"work folder: {work}")
     finally:

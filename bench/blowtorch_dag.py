@@ -23,7 +23,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: bench.blowtorch
 
-from bench.blowtorch import ROOT, commit, machine  # noqa: E402
+from bench.blowtorch import ROOT, append_record, commit, machine  # noqa: E402
 from pipeline.layout import HELD_OUT_GRID, MESH_FIGURE, OVERVIEW  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "blowtorch_dag.jsonl"
@@ -86,8 +86,7 @@ def main() -> None:
             scale = min(PICTURE_WIDTH / image.shape[1], 1.0)
             image = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
             cv2.imwrite(str(PICTURES / f"{picture.stem}.jpg"), image, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
-    with open(RESULTS, "a", encoding="utf-8") as f:
-        f.write(json.dumps({"machine": machine(), "commit": commit(), "label": args.label, **figures}) + "\n")
+    append_record(RESULTS, {"machine": machine(), "commit": commit(), "label": args.label, **figures})
 
 
 if __name__ == "__main__":

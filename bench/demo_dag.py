@@ -27,7 +27,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: bench.blowtorch
 
-from bench.blowtorch import ROOT, commit, machine  # noqa: E402
+from bench.blowtorch import ROOT, append_record, commit, machine  # noqa: E402
 from bench.blowtorch_dag import STAGES, stage_costs  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "demo_dag.jsonl"
@@ -149,9 +149,7 @@ def main() -> None:
                   f"{speed['training_minutes']:.1f} min")
         print(f"training: baseline {base_train:.1f} min / HEAD's train stage {head_train:.1f} min = "
               f"{record['training_ratio']:.2f}x")
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    with open(RESULTS, "a", encoding="utf-8") as f:
-        f.write(json.dumps(record) + "\n")
+    append_record(RESULTS, record)
     print(f"appended to {RESULTS}")
 
 

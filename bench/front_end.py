@@ -25,7 +25,6 @@ figures) to bench/results/front_end.jsonl.
 from __future__ import annotations
 
 import argparse
-import json
 import shutil
 import subprocess
 import sys
@@ -42,6 +41,7 @@ sys.path.insert(0, str(ROOT))  # run as a script: bench.blowtorch's shared helpe
 from bench.blowtorch import (  # noqa: E402
     FRONT_END,
     ORCA,
+    append_record,
     commit,
     machine,
     masks_agreement,
@@ -225,9 +225,7 @@ def main() -> None:
               "scenes": [{k: ({f: v for f, v in r[k].items() if f != "per_view"} if k == "masks" else r[k])
                           for k in r} for r in records]}
     if not args.no_record:
-        args.results.parent.mkdir(parents=True, exist_ok=True)
-        with open(args.results, "a", encoding="utf-8") as f:
-            f.write(json.dumps(record) + "\n")
+        append_record(args.results, record)
 
 
 if __name__ == "__main__":

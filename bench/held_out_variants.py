@@ -14,7 +14,6 @@ photo's gains matched, and the training time; appends a JSON line to bench/resul
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import tempfile
 from pathlib import Path
@@ -22,7 +21,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: bench.blowtorch
 
-from bench.blowtorch import DATASET, commit, machine, select_photos  # noqa: E402
+from bench.blowtorch import DATASET, append_record, commit, machine, select_photos  # noqa: E402
 from bench.phone_photos import build_capture, held_out_means, run_capture  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "held_out_variants.jsonl"
@@ -67,10 +66,8 @@ def main() -> None:
     photos = select_photos(DATASET, every=every, limit=args.photos)
     work = args.work or Path(tempfile.mkdtemp(prefix="held_out_variants_"))
     figures = run_variants(work, photos, args.downscale, args.iterations, args.variants)
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    with open(RESULTS, "a", encoding="utf-8") as f:
-        f.write(json.dumps({"machine": machine(), "commit": commit(), "label": args.label, "photos": len(photos),
-                            "downscale": args.downscale, "iterations": args.iterations, "variants": figures}) + "\n")
+    append_record(RESULTS, {"machine": machine(), "commit": commit(), "label": args.label, "photos": len(photos),
+                            "downscale": args.downscale, "iterations": args.iterations, "variants": figures})
 
 
 if __name__ == "__main__":

@@ -34,7 +34,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: bench.blowtorch's helpers
 
-from bench.blowtorch import DATASET, commit, machine, poses_undistortion, reference_mask  # noqa: E402
+from bench.blowtorch import DATASET, append_record, commit, machine, poses_undistortion, reference_mask  # noqa: E402
 from pipeline.cameras import CameraSet, load_cameras  # noqa: E402
 from pipeline.config import MasksConfig  # noqa: E402
 from pipeline.layout import CAMERAS_JSON, POSES, SPARSE, USER_MASKS  # noqa: E402
@@ -182,8 +182,7 @@ def variants(args: argparse.Namespace, run_views: MapViews) -> None:
         if not args.no_record:
             record = {"date": datetime.now().isoformat(timespec="seconds"), "machine": machine(), "commit": code,
                       **record}
-            with open(args.results, "a", encoding="utf-8") as f:
-                f.write(json.dumps(record) + "\n")
+            append_record(args.results, record)
 
 
 if __name__ == "__main__":

@@ -39,7 +39,7 @@ from PIL import Image
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: bench.blowtorch
 
-from bench.blowtorch import DATASET, ORCA, commit, machine, select_photos  # noqa: E402
+from bench.blowtorch import DATASET, ORCA, append_record, commit, machine, select_photos  # noqa: E402
 from pipeline.imageio import linear_to_srgb, srgb_to_linear  # noqa: E402
 from pipeline.layout import CAPTURE_YAML, LLFF_IMAGE_NAMES, PHOTO_SUBDIR, POSES_BOUNDS, USER_MASKS  # noqa: E402
 
@@ -241,10 +241,8 @@ def main() -> None:
     else:
         figures = run(work, photos, args.downscale, overrides, args.seed, args.held_out)
     print(json.dumps({k: v for k, v in figures.items() if k != "per_photo"}, indent=1))
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    with open(RESULTS, "a", encoding="utf-8") as f:
-        f.write(json.dumps({"machine": machine(), "commit": commit(), "photos": len(photos), "paired": args.paired,
-                            "downscale": args.downscale, "seed": args.seed, "overrides": overrides, **figures}) + "\n")
+    append_record(RESULTS, {"machine": machine(), "commit": commit(), "photos": len(photos), "paired": args.paired,
+                            "downscale": args.downscale, "seed": args.seed, "overrides": overrides, **figures})
 
 
 if __name__ == "__main__":

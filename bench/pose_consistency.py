@@ -17,7 +17,6 @@ Prints a line per run and appends a JSON line to bench/results/pose_consistency.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -31,6 +30,7 @@ sys.path.insert(0, str(ROOT))
 
 from bench.blowtorch import (  # noqa: E402
     DATASET,
+    append_record,
     commit,
     machine,
     pose_agreement,
@@ -127,8 +127,7 @@ def main() -> None:
     if not args.no_record:
         record = {"date": time.strftime("%Y-%m-%dT%H:%M:%S"), "machine": machine(), "commit": commit(),
                   "grid": args.grid, "extent": args.extent, "note": args.note, "runs": runs}
-        with open(args.results, "a", encoding="utf-8") as f:
-            f.write(json.dumps(record) + "\n")
+        append_record(args.results, record)
 
 
 if __name__ == "__main__":

@@ -14,7 +14,6 @@ to bench/results/render_speed.jsonl with the machine's description.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from dataclasses import replace
@@ -23,7 +22,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: bench.blowtorch's helpers
 
-from bench.blowtorch import commit, machine  # noqa: E402
+from bench.blowtorch import append_record, commit, machine  # noqa: E402
 from pipeline.cameras import load_cameras  # noqa: E402
 from pipeline.rendering import load_renderer, render_composite_view, render_environment_view  # noqa: E402
 
@@ -62,9 +61,7 @@ def main() -> None:
     record = {"date": datetime.now().isoformat(timespec="seconds"), "machine": machine(), "commit": commit(),
               "train": str(args.train), "views": [c.name for c in cameras],
               "size": [cameras[0].width, cameras[0].height], "results": rows}
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    with open(RESULTS, "a", encoding="utf-8") as f:
-        f.write(json.dumps(record) + "\n")
+    append_record(RESULTS, record)
     print(f"appended to {RESULTS}")
 
 

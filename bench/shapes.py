@@ -24,7 +24,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: bench.blowtorch
 
-from bench.blowtorch import ORCA, commit, machine, timed  # noqa: E402
+from bench.blowtorch import ORCA, append_record, commit, machine, timed  # noqa: E402
 from bench.demo_dag import object_figures  # noqa: E402
 from pipeline.layout import MESH_FIGURE  # noqa: E402
 from pipeline.synth.family import traits  # noqa: E402
@@ -99,8 +99,7 @@ def main() -> None:
     if not args.no_record:
         record = {"date": datetime.now().isoformat(timespec="seconds"), "machine": machine(), "commit": code,
                   "preset": args.preset, "sets": args.sets, "scenes": rows}
-        with open(RESULTS, "a", encoding="utf-8") as f:
-            f.write(json.dumps(record) + "\n")
+        append_record(RESULTS, record)
     print(f"work folder: {work}")
 
 

@@ -28,7 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: bench.blowtorch's helpers
 
-from bench.blowtorch import commit, machine  # noqa: E402
+from bench.blowtorch import append_record, commit, machine  # noqa: E402
 from bench.masks_variants import working_views  # noqa: E402
 from pipeline.config import MasksConfig  # noqa: E402
 from pipeline.masking.prior import in_sphere_frame  # noqa: E402
@@ -88,8 +88,7 @@ def main() -> None:
     if not args.no_record:
         record = {"date": datetime.now().isoformat(timespec="seconds"), "machine": machine(), "commit": commit(),
                   "variant": variant, "every": args.every, "captures": rows}
-        with open(RESULTS, "a") as f:
-            f.write(json.dumps(record) + "\n")
+        append_record(RESULTS, record)
 
 
 if __name__ == "__main__":
