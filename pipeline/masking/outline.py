@@ -20,24 +20,27 @@ import cv2
 import numpy as np
 
 from ..imageio import srgb_to_linear
+from .views import disc
 
-CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+
+def sure_sides(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(H, W)`` float32 twice, 1 where sure: the object and the background more than a pixel from the outline of
+    ``mask`` ``(H, W)`` bool (the mask, and its complement, eroded by a 1 px disc). Neither: the outline's pixels
+    on both sides."""
+    m = mask.astype(np.uint8)
+    return cv2.erode(m, disc(1)).astype(np.float32), cv2.erode(1 - m, disc(1)).astype(np.float32)
 
 
-def side_colours(linear: np.ndarray, mask: np.ndarray, reach_px: int) -> tuple[np.ndarray, ...]:
+def side_colours(linear: np.ndarray, inside: np.ndarray, outside: np.ndarray, reach_px: int
+                 ) -> tuple[np.ndarray, ...]:
     """The sure object's and the sure background's mean colours within ``reach_px`` of each pixel.
 
-    Sure: more than a pixel from the outline (the mask eroded, or its complement eroded, by a 3x3 cross).
-
     Args:
-        linear: ``(H, W, 3)`` float32 linear colour; mask: ``(H, W)`` bool.
+        linear: ``(H, W, 3)`` float32 linear colour; inside, outside: :func:`sure_sides`.
     Returns:
         ``F``, ``B`` ``(H, W, 3)`` float32 and the counts of sure object and sure background pixels they average,
         ``(H, W)`` float32 (0: none within reach, the colour is meaningless).
     """
-    m = mask.astype(np.uint8)
-    inside = cv2.erode(m, CROSS).astype(np.float32)
-    outside = cv2.erode(1 - m, CROSS).astype(np.float32)
     box = (2 * reach_px + 1, 2 * reach_px + 1)
     n_in = cv2.boxFilter(inside, -1, box, normalize=False)
     n_out = cv2.boxFilter(outside, -1, box, normalize=False)
@@ -72,10 +75,10 @@ def snap_outline(image: np.ndarray, mask: np.ndarray, reach_px: int, min_contras
     Returns:
         ``(H, W)`` bool.
     """
-    m = mask.astype(np.uint8)
-    band = (cv2.dilate(m, CROSS) > 0) & ~(cv2.erode(m, CROSS) > 0)
+    inside, outside = sure_sides(mask)
+    band = (inside == 0) & (outside == 0)
     linear = srgb_to_linear(image.astype(np.float32) / 255.0)
-    f, b, n_in, n_out = side_colours(linear, mask, reach_px)
+    f, b, n_in, n_out = side_colours(linear, inside, outside, reach_px)
     a, residual, contrast = coverage(linear, f, b)
     sure = band & (n_in > 0) & (n_out > 0) & (contrast >= min_contrast) & (residual <= max_residual)
     out = mask.copy()
