@@ -67,6 +67,13 @@ class DecodeConfig(StrictModel):
         description="raw values at or above black + clip_fraction x (white - black) count as clipped "
         "(8/16-bit files: at or above this fraction of the maximum code value).",
     )
+    clip_dilate_raw: int = Field(
+        0, ge=0, le=4, description="RAW: the clipped mask grown by this many raw pixels. Training takes a clipped "
+        "pixel as a lower bound, so every pixel flagged beyond the saturated photosites lets a reflected light "
+        "bloom: their decoded values are measurements (on the demo within a few percent of the truth in the "
+        "median at 2 px, colour-skewed next to a saturated photosite) and 0 fits the lights' edges best "
+        "(docs/method.md)",
+    )
     demosaic: Literal["AHD", "DHT", "VNG", "PPG", "DCB", "AAHD", "LINEAR"] = Field(
         "AHD", description="LibRaw demosaicing algorithm for RAW files."
     )

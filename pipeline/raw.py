@@ -49,8 +49,6 @@ Kind = Literal["raw", "jpeg", "png", "tiff", "heif"]
 _FLIP_TO_EXIF = {0: 1, 1: 2, 3: 3, 2: 4, 4: 5, 6: 6, 7: 7, 5: 8}
 # Extra factor of headroom for LibRaw's camera -> sRGB matrix, which can push saturated colours above 1.
 MATRIX_HEADROOM = 2.0
-# Raw-space dilation (pixels) of the clipped mask: demosaicing spreads a photosite about 2 pixels.
-CLIP_DILATE_RAW = 2
 # Half-size of the window whose photosites must all be saturated for a pixel to be set neutral: with 2 (AHD's
 # whole 5 x 5 window) small highlights kept LibRaw's saturated value, a 3 x 3 window catches every such pixel.
 SATURATED_REACH = 1
@@ -374,6 +372,18 @@ def _dilate(mask: np.ndarray, radius: int) -> np.ndarray:
     return cv2.dilate(mask.astype(np.uint8), k).astype(bool)
 
 
+def _closed(mask: np.ndarray) -> np.ndarray:
+    """``(H, W)`` bool: the mask with the photosites between its own filled (a 3 x 3 closing). A light that
+    saturates one colour's photosites flags every pixel among them, whose other colours demosaicing reads from
+    them (so are at least what they record); the mask grows no further than its outermost photosites."""
+    if not mask.any():
+        return mask
+    import cv2
+
+    k = np.ones((3, 3), np.uint8)
+    return cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, k, borderType=cv2.BORDER_REPLICATE).astype(bool)
+
+
 def _saturated_everywhere(saturated: np.ndarray, colors: np.ndarray | None) -> np.ndarray:
     """``(H, W)`` bool: pixels whose photosites of every colour within :data:`SATURATED_REACH` are saturated.
 
@@ -416,8 +426,11 @@ def decode_raw(
     black_level: int | None = None,
     white_level: int | None = None,
     clip_fraction: float = 0.98,
+    clip_dilate: int = 0,
 ) -> Decoded:
-    """Demosaic a RAW file into linear float RGB (see the module doc for units), plus its clipped mask."""
+    """Demosaic a RAW file into linear float RGB (see the module doc for units), plus its clipped mask: the
+    pixels whose photosite saturated and those between them (:func:`_closed`), grown by ``clip_dilate`` raw
+    pixels."""
     import rawpy
 
     path = info.path
@@ -448,7 +461,7 @@ def decode_raw(
             saturated = _saturated_everywhere(raw_clip, None if raw.ndim == 3 else r.raw_colors_visible)
             if raw_clip.ndim == 3:
                 raw_clip = raw_clip.any(axis=2)
-            raw_clip = _dilate(raw_clip, CLIP_DILATE_RAW)
+            raw_clip = _dilate(_closed(raw_clip), clip_dilate)
 
             lo, hi = float(wb.min()), float(wb.max())
             headroom = hi / lo * (MATRIX_HEADROOM if color_space == "srgb" else 1.0)

@@ -15,7 +15,8 @@ default the first file in name order):
   (``decode.normalize_exposure``). A field no photo records is left out; a field only some photos record
   is an error (we cannot tell how those photos were exposed).
 - Highlight-clipped pixels: raw values at or above ``black + clip_fraction * (white - black)`` in any
-  channel, dilated 2 raw pixels (before white balance), plus anything LibRaw's output clipped.
+  channel (before white balance; grown by ``decode.clip_dilate_raw`` pixels), plus anything LibRaw's output
+  clipped.
 - ``decode.downscale``: k x k area averaging; a block is clipped if any of its pixels is. Without one, photos
   larger than ``decode.max_size`` (1600 px longest side) are downscaled by the smallest factor that fits.
 
@@ -156,6 +157,7 @@ def run_decode(capture_dir: Path, out_dir: Path, config: DecodeConfig) -> Decode
                         black_level=config.black_level,
                         white_level=config.white_level,
                         clip_fraction=config.clip_fraction,
+                        clip_dilate=config.clip_dilate_raw,
                     )
                 else:
                     d = raw.decode_raster(info, clip_fraction=config.clip_fraction)
@@ -216,7 +218,8 @@ def _pipeline_doc(config: DecodeConfig, infos: list[PhotoInfo]) -> dict[str, Any
         "jpeg_png_tiff": "inverse sRGB transfer of the stored values (1.0 = maximum code value); float TIFF as is",
         "units": "1.0 = a neutral at the reference image's white level; other images scaled to the reference's "
         "exposure",
-        "clipped": f"raw >= black + {config.clip_fraction} (white - black) in any channel, dilated 2 raw pixels, "
+        "clipped": f"raw >= black + {config.clip_fraction} (white - black) in any channel, dilated "
+        f"{config.clip_dilate_raw} raw pixels, "
         "plus LibRaw output overflow; 8/16-bit files: any channel >= "
         f"{config.clip_fraction} of the maximum, dilated 1 pixel",
         "formats": sorted({i.kind for i in infos}),
