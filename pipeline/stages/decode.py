@@ -15,8 +15,8 @@ default the first file in name order):
   (``decode.normalize_exposure``). A field no photo records is left out; a field only some photos record
   is an error (we cannot tell how those photos were exposed).
 - Highlight-clipped pixels: raw values at or above ``black + clip_fraction * (white - black)`` in any
-  channel (before white balance; grown by ``decode.clip_dilate_raw`` pixels), plus anything LibRaw's output
-  clipped.
+  channel (before white balance) and the pixels between such photosites, grown by ``decode.clip_dilate_raw``
+  pixels, plus anything LibRaw's output clipped.
 - ``decode.downscale``: k x k area averaging; a block is clipped if any of its pixels is. Without one, photos
   larger than ``decode.max_size`` (1600 px longest side) are downscaled by the smallest factor that fits.
 
@@ -218,8 +218,8 @@ def _pipeline_doc(config: DecodeConfig, infos: list[PhotoInfo]) -> dict[str, Any
         "jpeg_png_tiff": "inverse sRGB transfer of the stored values (1.0 = maximum code value); float TIFF as is",
         "units": "1.0 = a neutral at the reference image's white level; other images scaled to the reference's "
         "exposure",
-        "clipped": f"raw >= black + {config.clip_fraction} (white - black) in any channel, dilated "
-        f"{config.clip_dilate_raw} raw pixels, "
+        "clipped": f"raw >= black + {config.clip_fraction} (white - black) in any channel and the pixels between "
+        f"such photosites (3 x 3 closing), grown by {config.clip_dilate_raw} raw pixels, "
         "plus LibRaw output overflow; 8/16-bit files: any channel >= "
         f"{config.clip_fraction} of the maximum, dilated 1 pixel",
         "formats": sorted({i.kind for i in infos}),
