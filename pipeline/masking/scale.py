@@ -3,6 +3,7 @@ brought back up with their outline snapped to the photo's edges."""
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING, Any
 
 import cv2
@@ -14,24 +15,33 @@ from .views import View
 if TYPE_CHECKING:
     from ..results import DecodeArtifacts
 
-# Pixels around a clipped highlight that segmentation treats as part of it (decoded size). Decode flags only the
+# Raw pixels around a RAW photo's clipped highlight that segmentation treats as part of it. Decode flags only the
 # saturated photosites (training's lower bounds), but the pixels beside them change with the viewpoint as the
 # highlight does, and their colours are skewed by demosaicing: the photo-consistency tests and GrabCut's core
-# kept 2 pixels' distance from them when decode itself grew its mask that far (demo masks 0.956 median IoU;
-# without the margin 0.936).
-HIGHLIGHT_MARGIN_PX = 2
+# kept this distance from them when decode itself grew its mask that far (the demo's masks: 0.956 median IoU
+# with it, 0.936 without). 8/16-bit photos' masks are grown by decode as before.
+HIGHLIGHT_MARGIN_RAW_PX = 2
+
+
+def highlight_margin(entry: dict[str, Any]) -> int:
+    """Pixels of the decoded photo (its ``decode.json`` record) to grow its clipped mask by:
+    :data:`HIGHLIGHT_MARGIN_RAW_PX` raw pixels at the decoded size, for RAW photos."""
+    if entry.get("format") != "raw":
+        return 0
+    downscale = max(entry["source_size"]) / max(entry["width"], entry["height"]) if entry.get("source_size") else 1.0
+    return math.ceil(HIGHLIGHT_MARGIN_RAW_PX / max(downscale, 1.0))
 
 
 def load_view(decoded: DecodeArtifacts, cam: Any, scale: float) -> View:
     """One photo at the working size (``scale`` of the camera's size): sRGB, clipped highlights (grown by
-    :data:`HIGHLIGHT_MARGIN_PX`), intrinsics."""
+    :func:`highlight_margin`), intrinsics."""
     srgb = decoded.srgb(cam.name)
     if srgb.shape[:2] != (cam.height, cam.width):
         raise InputError(f"image {cam.name} is {srgb.shape[1]}x{srgb.shape[0]} but its camera says "
                          f"{cam.width}x{cam.height}", decoded.folder, fix="rerun poses on this decode folder")
     size = (max(1, round(cam.width * scale)), max(1, round(cam.height * scale)))
-    clipped = cv2.dilate(decoded.clipped(cam.name).astype(np.uint8), np.ones((2 * HIGHLIGHT_MARGIN_PX + 1,) * 2,
-                                                                             np.uint8)) > 0
+    reach = highlight_margin(decoded.entry(cam.name))
+    clipped = cv2.dilate(decoded.clipped(cam.name).astype(np.uint8), np.ones((2 * reach + 1,) * 2, np.uint8)) > 0
     K = cam.K.copy()
     if scale != 1.0:
         srgb = cv2.resize(srgb, size, interpolation=cv2.INTER_AREA)

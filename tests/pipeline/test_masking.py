@@ -26,6 +26,7 @@ from pipeline.masking.hull import (
 )
 from pipeline.masking.parallel import view_workers
 from pipeline.masking.prior import PriorSphere, find_prior_sphere, in_sphere_frame, outgrown
+from pipeline.masking.scale import highlight_margin
 from pipeline.masking.segment import (
     Evidence,
     contact_band,
@@ -1171,3 +1172,14 @@ def test_worker_processes_make_the_same_masks_as_one_process():
     for a, b in zip(alone.masks + alone.hull_masks, pooled.masks + pooled.hull_masks):
         assert np.array_equal(a, b)
     assert np.array_equal(alone.volume, pooled.volume)
+
+
+def test_highlight_margin_is_two_raw_pixels_at_the_decoded_size():
+    """A RAW photo's clipped highlights are grown by 2 raw pixels for segmentation (decode flags only the saturated
+    photosites); portrait photos (source size unrotated) and downscaled ones alike; 8-bit photos' masks, which
+    decode grows itself, are not grown again."""
+    raw = {"format": "raw", "source_size": [6000, 4000], "width": 6000, "height": 4000}
+    assert highlight_margin(raw) == 2
+    assert highlight_margin({**raw, "width": 2000, "height": 3000}) == 1  # rotated, downscaled 2x
+    assert highlight_margin({**raw, "width": 1500, "height": 1000}) == 1  # a fraction of a pixel is one
+    assert highlight_margin({"format": "jpeg", "source_size": [4032, 3024], "width": 4032, "height": 3024}) == 0
