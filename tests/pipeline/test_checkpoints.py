@@ -63,10 +63,12 @@ def test_optimizer_groups_split_only_for_their_options():
     from pipeline.model_io import model_spec
     from pipeline.training import parameter_groups
 
-    cfg = load_config(preset="fast").train
+    fast = load_config(preset="fast").train
+    cfg = fast.model_copy(update={"environment_lr": None})
     model = OrcaModel(model_spec(cfg))
     default = parameter_groups(model, cfg)
     assert len(default) == 1 and len(default[0]["params"]) == len(list(model.parameters()))
+    assert [g.get("lr") for g in parameter_groups(model, fast)] == [None, fast.environment_lr]
     split = parameter_groups(model, cfg.model_copy(update={"environment_lr": 0.02}))
     assert [g.get("lr") for g in split] == [None, 0.02]
     assert {id(p) for p in split[1]["params"]} == {id(p) for p in model.env_field.parameters()}

@@ -87,7 +87,7 @@ FLAT_PRESETS = {
             "texture_levels": 8, "texture_log2_table": 17, "texture_max_resolution": 512,
             "env_grid_log2_table": 17, "n_coarse": 24, "n_fine": 8, "upsample_steps": 2, "band_samples": 16,
             "env_samples": 24, "env_fine": 24, "env_fine_render": 96, "background_rays": 768,
-            "cone_samples": 1,
+            "cone_samples": 1, "environment_lr": 0.015,
         },
         "mesh": {"resolution": 128},
         "export": {
