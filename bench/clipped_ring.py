@@ -38,9 +38,9 @@ def ring_log_ratios(photos: list[Path], truth_of, white_balance) -> dict[str, np
     growing it from a - 1 to b raw pixels adds)."""
     rings: dict[str, list[np.ndarray]] = {}
     for path in photos:
-        masks, linear = {}, None
+        info, masks, linear = probe(path), {}, None
         for r in RADII:
-            decoded = decode_raw(probe(path), white_balance=white_balance, clip_dilate=r)
+            decoded = decode_raw(info, white_balance=white_balance, clip_dilate=r)
             masks[r], linear = decoded.clipped, decoded.linear
         truth = truth_of(path.stem)
         for inner, r in zip((None, *RADII), RADII):
@@ -57,15 +57,13 @@ def main() -> None:
     ap.add_argument("capture", type=Path, help="an `orca synth` capture folder (DNG photos + ground_truth/)")
     ap.add_argument("--every", type=int, default=1, help="every k-th photo")
     args = ap.parse_args()
-    import rawpy
-
     gt = resolve_ground_truth(args.capture)
     photos = sorted(args.capture.glob("*.dng"))[:: args.every]
     if not photos:
         raise SystemExit(f"no DNG photos in {args.capture}")
-    with rawpy.imread(str(photos[0])) as r:
-        wb = np.asarray(r.camera_whitebalance[:3], float)
-    white_balance = tuple(wb / wb[1])
+    white_balance = probe(photos[0]).as_shot_wb
+    if white_balance is None:
+        raise SystemExit(f"{photos[0]} records no as-shot white balance")
     rings = ring_log_ratios(photos, lambda name: gt.exr("linear", f"{name}.exr")[..., :3] * gt.factor,
                             white_balance)
     figures = {}

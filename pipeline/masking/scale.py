@@ -40,8 +40,9 @@ def load_view(decoded: DecodeArtifacts, cam: Any, scale: float) -> View:
         raise InputError(f"image {cam.name} is {srgb.shape[1]}x{srgb.shape[0]} but its camera says "
                          f"{cam.width}x{cam.height}", decoded.folder, fix="rerun poses on this decode folder")
     size = (max(1, round(cam.width * scale)), max(1, round(cam.height * scale)))
-    reach = highlight_margin(decoded.entry(cam.name))
-    clipped = cv2.dilate(decoded.clipped(cam.name).astype(np.uint8), np.ones((2 * reach + 1,) * 2, np.uint8)) > 0
+    clipped = decoded.clipped(cam.name)
+    if reach := highlight_margin(decoded.entry(cam.name)):
+        clipped = cv2.dilate(clipped.astype(np.uint8), np.ones((2 * reach + 1,) * 2, np.uint8)) > 0
     K = cam.K.copy()
     if scale != 1.0:
         srgb = cv2.resize(srgb, size, interpolation=cv2.INTER_AREA)
