@@ -406,6 +406,21 @@ class MasksConfig(StrictModel):
         0.5, gt=0, description="...and the pixel's colour lies within this share of the two colours' difference of "
         "the line between them (a highlight, texture or a shaded rim is no mix of the two)"
     )
+    snap_band_px: float = Field(
+        2.0, ge=0, description="photos larger than the working size: the mask's outline, brought up to the photo's "
+        "size, is moved onto the photo's edges within this many working pixels of it (GrabCut at full size in that "
+        "band; pipeline.masking.scale.snap_to_edges). The blowtorch's 1060x707 photos: IoU 0.924 / 0.848 -> 0.952 / "
+        "0.866 (median / worst view; docs/masks.md). 0: off"
+    )
+    snap_iterations: int = Field(2, ge=1, description="...GrabCut's own iterations there")
+    snap_min_edge_gain: float = Field(
+        1.25, ge=0, description="...kept only where the snapped outline's median image gradient is at least this "
+        "many times the outline's before (a glossy rim mirroring the room has its strongest edge inside the object)"
+    )
+    snap_min_core: float = Field(
+        0.8, ge=0, le=1, description="...and only where at least this share of the mask lies farther than the band "
+        "from its outline (a small or thin object's colour model would be mostly band)"
+    )
     trim_seen_through_votes: float = Field(
         0.75, gt=0, description="...a pixel may be trimmed where every voxel its ray crosses in the hull has at "
         "least this many background votes (0.75: one view's, not a dark pixel's doubtful half vote). Higher: "

@@ -96,7 +96,7 @@ from ..masking.prior import (
     outgrown,
     touching_views,
 )
-from ..masking.scale import full_size_mask, load_view, reduce
+from ..masking.scale import EdgeSnap, full_size_mask, load_view, reduce
 from ..masking.segment import probe_masks, segment, segment_options
 from ..masking.tracks import tracks_for_views
 from ..masking.views import Plane, View
@@ -271,6 +271,7 @@ def run_masks(
     for w in warnings:
         log.warning("%s", w)
 
+    snap = EdgeSnap(config.snap_band_px, config.snap_iterations, config.snap_min_edge_gain, config.snap_min_core)
     with atomic_dir(out_dir, MASKS, sources) as tmp:
         (tmp / MASK_FILES).mkdir()
         (tmp / OVERLAYS).mkdir()
@@ -279,10 +280,11 @@ def run_masks(
             task = bar.add_task("write masks", total=len(names))
             for i, cam in enumerate(cameras.cameras):
                 photo = decoded.srgb(cam.name)
+                snapped = False
                 if cam.name in user_files:  # read again, not kept from loading: one full-size mask in memory
                     full = user_mask(user_files[cam.name], cam, undistortion)
                 else:
-                    full = full_size_mask(final[i], photo)
+                    full, snapped = full_size_mask(final[i], photo, snap)
                 write_png(tmp / mask_file(cam.name), np.where(full, 255, 0).astype(np.uint8))
                 flagged = agreement[i] < config.agreement_warning
                 overlay = mask_overlay(photo, full, hulls[i], cam.name in user_files, config.overlay_size)
@@ -296,6 +298,7 @@ def run_masks(
                     "area_fraction": float(np.count_nonzero(full) / full.size),
                     "hull_iou": agreement[i],
                     "disagrees_with_hull": bool(flagged),
+                    "outline_snapped": snapped,
                 })
                 bar.advance(task)
         write_jpeg(tmp / CONTACT_SHEET, contact_sheet(tiles))
@@ -411,6 +414,10 @@ def _report(records: list[dict[str, Any]], agreement: list[float], sphere: tuple
         },
         "rounds": rounds,
         "work_scale": scale,
+        "outline_snapped": {
+            "what": "views whose outline, brought up from the working size, was moved onto the photo's edges "
+            "(masks.snap_*: kept only where it found clearly stronger edges)",
+            "views": [r["name"] for r in records if r["outline_snapped"]]},
         "warnings": warnings,
         "seconds": round(seconds, 2),
     }
