@@ -43,9 +43,13 @@ SETTINGS = {
     "guided filter only": None,
     "band 1, unguarded": dataclasses.replace(UNGUARDED, band_px=1.0),
     "band 2, unguarded": UNGUARDED,
-    "band 2, edge gain 1.1": dataclasses.replace(DEFAULT, min_core=0.0, min_edge_gain=1.1),
-    "band 2, edge gain 1.25": dataclasses.replace(DEFAULT, min_core=0.0),
-    "band 2, edge gain 1.25, core 0.8 (default)": DEFAULT,
+    "band 2, edge gain 1.1": dataclasses.replace(UNGUARDED, min_edge_gain=1.1),
+    "band 2, edge gain 1.25": dataclasses.replace(UNGUARDED, min_edge_gain=1.25),
+    "band 2, edge gain 1.5": dataclasses.replace(UNGUARDED, min_edge_gain=1.5),
+    "band 1, edge gain 1.5, core 0.8": dataclasses.replace(DEFAULT, band_px=1.0),
+    "band 2, edge gain 1.25, core 0.8": dataclasses.replace(DEFAULT, min_edge_gain=1.25),
+    "band 2, edge gain 1.5, core 0.9": dataclasses.replace(DEFAULT, min_core=0.9),
+    "band 2, edge gain 1.5, core 0.8 (default)": DEFAULT,
 }
 
 
