@@ -30,14 +30,13 @@ from bench.blowtorch import DATASET, commit, machine, poses_undistortion, refere
 from pipeline.config import MasksConfig  # noqa: E402
 from pipeline.layout import MASKS, USER_MASKS  # noqa: E402
 from pipeline.mask_file import read_mask  # noqa: E402
-from pipeline.masking.scale import EdgeSnap, full_size_mask, reduce, snap_to_edges  # noqa: E402
+from pipeline.masking.scale import edge_snap, full_size_mask, reduce, snap_to_edges  # noqa: E402
 from pipeline.metrics import iou  # noqa: E402
 from pipeline.results import load_masks  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "masks_edge_snap.json"
 WORK_SIZE = MasksConfig().work_size
-DEFAULT = EdgeSnap(MasksConfig().snap_band_px, MasksConfig().snap_iterations, MasksConfig().snap_min_edge_gain,
-                   MasksConfig().snap_min_core)
+DEFAULT = edge_snap(MasksConfig())
 UNGUARDED = dataclasses.replace(DEFAULT, min_edge_gain=0.0, min_core=0.0)
 SETTINGS = {
     "guided filter only": None,
@@ -46,10 +45,10 @@ SETTINGS = {
     "band 2, edge gain 1.1": dataclasses.replace(UNGUARDED, min_edge_gain=1.1),
     "band 2, edge gain 1.25": dataclasses.replace(UNGUARDED, min_edge_gain=1.25),
     "band 2, edge gain 1.5": dataclasses.replace(UNGUARDED, min_edge_gain=1.5),
-    "band 1, edge gain 1.5, core 0.8": dataclasses.replace(DEFAULT, band_px=1.0),
-    "band 2, edge gain 1.25, core 0.8": dataclasses.replace(DEFAULT, min_edge_gain=1.25),
-    "band 2, edge gain 1.5, core 0.9": dataclasses.replace(DEFAULT, min_core=0.9),
-    "band 2, edge gain 1.5, core 0.8 (default)": DEFAULT,
+    "band 1, edge gain 1.25, core 0.8": dataclasses.replace(DEFAULT, band_px=1.0),
+    "band 2, edge gain 1.5, core 0.8": dataclasses.replace(DEFAULT, min_edge_gain=1.5),
+    "band 2, edge gain 1.25, core 0.9": dataclasses.replace(DEFAULT, min_core=0.9),
+    "band 2, edge gain 1.25, core 0.8 (default)": DEFAULT,
 }
 
 

@@ -65,6 +65,11 @@ class EdgeSnap:
     min_core: float  # the share of the mask farther than the band from its outline, at least
 
 
+def edge_snap(config: Any) -> EdgeSnap:
+    """The :class:`EdgeSnap` of a masks configuration's ``snap_*`` settings (``pipeline.config.MasksConfig``)."""
+    return EdgeSnap(config.snap_band_px, config.snap_iterations, config.snap_min_edge_gain, config.snap_min_core)
+
+
 def full_size_mask(mask: np.ndarray, photo: np.ndarray, snap: EdgeSnap | None = None) -> tuple[np.ndarray, bool]:
     """A working-size mask ``(h, w)`` -> ``(H, W)`` bool at the photo's size, its outline snapped to the photo's
     edges: a guided filter of the upsampled mask (guide the photo, radius ~ the scale factor), then

@@ -96,7 +96,7 @@ from ..masking.prior import (
     outgrown,
     touching_views,
 )
-from ..masking.scale import EdgeSnap, full_size_mask, load_view, reduce
+from ..masking.scale import edge_snap, full_size_mask, load_view, reduce
 from ..masking.segment import probe_masks, segment, segment_options
 from ..masking.tracks import tracks_for_views
 from ..masking.views import Plane, View
@@ -271,7 +271,7 @@ def run_masks(
     for w in warnings:
         log.warning("%s", w)
 
-    snap = EdgeSnap(config.snap_band_px, config.snap_iterations, config.snap_min_edge_gain, config.snap_min_core)
+    snap = edge_snap(config)
     with atomic_dir(out_dir, MASKS, sources) as tmp:
         (tmp / MASK_FILES).mkdir()
         (tmp / OVERLAYS).mkdir()

@@ -5,11 +5,12 @@ import cv2
 import numpy as np
 import pytest
 
-from pipeline.masking.scale import EdgeSnap, full_size_mask, reduce
+from pipeline.config import MasksConfig
+from pipeline.masking.scale import edge_snap, full_size_mask, reduce
 from pipeline.metrics import iou
 
 SIZE, WORK = 256, 64  # the photo and the working size: 4x, as a 2000 px photo segmented at 480
-SNAP = EdgeSnap(band_px=2.0, iterations=2, min_edge_gain=1.5, min_core=0.8)
+SNAP = edge_snap(MasksConfig())  # the shipped defaults
 
 
 def textured(colour, shape, seed):
