@@ -406,6 +406,12 @@ class MasksConfig(StrictModel):
         0.5, gt=0, description="...and the pixel's colour lies within this share of the two colours' difference of "
         "the line between them (a highlight, texture or a shaded rim is no mix of the two)"
     )
+    trim_seen_through_votes: float = Field(
+        0.75, gt=0, description="...a pixel may be trimmed where every voxel its ray crosses in the hull has at "
+        "least this many background votes (0.75: one view's, not a dark pixel's doubtful half vote). Higher: "
+        "fewer pixels; unrestricted, a dark glossy blob's rims, which mirror the room, went (worst view 0.962 -> "
+        "0.874)"
+    )
     snap_band_px: float = Field(
         2.0, ge=0, description="photos larger than the working size: the mask's outline, brought up to the photo's "
         "size, is moved onto the photo's edges within this many working pixels of it (GrabCut at full size in that "
@@ -420,12 +426,6 @@ class MasksConfig(StrictModel):
     snap_min_core: float = Field(
         0.8, ge=0, le=1, description="...and only where at least this share of the mask lies farther than the band "
         "from its outline (a small or thin object's colour model would be mostly band)"
-    )
-    trim_seen_through_votes: float = Field(
-        0.75, gt=0, description="...a pixel may be trimmed where every voxel its ray crosses in the hull has at "
-        "least this many background votes (0.75: one view's, not a dark pixel's doubtful half vote). Higher: "
-        "fewer pixels; unrestricted, a dark glossy blob's rims, which mirror the room, went (worst view 0.962 -> "
-        "0.874)"
     )
     seed_radius: float = Field(
         0.3, ge=0, lt=1, description="before any hull, the central part of the unit sphere's image (this fraction of "
