@@ -45,10 +45,10 @@ SETTINGS = {
     "band 2, edge gain 1.1": dataclasses.replace(UNGUARDED, min_edge_gain=1.1),
     "band 2, edge gain 1.25": dataclasses.replace(UNGUARDED, min_edge_gain=1.25),
     "band 2, edge gain 1.5": dataclasses.replace(UNGUARDED, min_edge_gain=1.5),
-    "band 1, edge gain 1.25, core 0.8": dataclasses.replace(DEFAULT, band_px=1.0),
-    "band 2, edge gain 1.5, core 0.8": dataclasses.replace(DEFAULT, min_edge_gain=1.5),
-    "band 2, edge gain 1.25, core 0.9": dataclasses.replace(DEFAULT, min_core=0.9),
-    "band 2, edge gain 1.25, core 0.8 (default)": DEFAULT,
+    "band 1, edge gain 1.5, core 0.8": dataclasses.replace(DEFAULT, band_px=1.0),
+    "band 2, edge gain 1.25, core 0.8": dataclasses.replace(DEFAULT, min_edge_gain=1.25),
+    "band 2, edge gain 1.5, core 0.9": dataclasses.replace(DEFAULT, min_core=0.9),
+    "band 2, edge gain 1.5, core 0.8 (default)": DEFAULT,
 }
 
 

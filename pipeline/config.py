@@ -416,11 +416,11 @@ class MasksConfig(StrictModel):
         2.0, ge=0, description="photos larger than the working size: the mask's outline, brought up to the photo's "
         "size, is moved onto the photo's edges within this many working pixels of it (GrabCut at full size in that "
         "band; pipeline.masking.scale.snap_to_edges). The blowtorch's 1060x707 photos through the stage: IoU 0.924 / "
-        "0.848 -> 0.953 / 0.866 (median / worst view; docs/masks.md). 0: off"
+        "0.848 -> 0.947 / 0.866 (median / worst view; docs/masks.md). 0: off"
     )
     snap_iterations: int = Field(2, ge=1, description="...GrabCut's own iterations there")
     snap_min_edge_gain: float = Field(
-        1.25, ge=0, description="...kept only where the snapped outline's median image gradient is at least this "
+        1.5, ge=0, description="...kept only where the snapped outline's median image gradient is at least this "
         "many times the outline's before (a glossy rim mirroring the room has its strongest edge inside the object)"
     )
     snap_min_core: float = Field(
