@@ -40,6 +40,13 @@ def working_mask(truth, grow_px):
     return cv2.dilate(small, np.ones((2 * grow_px + 1,) * 2, np.uint8)) > 0
 
 
+def assert_left_as_brought_up(small, photo):
+    """The snap leaves ``small``'s outline where the guided filter brought it up, and says so."""
+    brought_up, _ = full_size_mask(small, photo)
+    kept_mask, kept = full_size_mask(small, photo, SNAP)
+    assert not kept and np.array_equal(kept_mask, brought_up)
+
+
 def test_an_outline_a_working_pixel_off_is_moved_onto_the_photos_edge():
     truth = blob(70)
     photo = photo_of(truth)
@@ -58,20 +65,14 @@ def test_a_soft_edge_keeps_the_outline_brought_up():
     """A blurred edge has its strongest gradient where the outline already is: no clearly stronger edge, no snap."""
     truth = blob(70)
     photo = photo_of(truth, blur=6.0)
-    small = reduce(truth, (WORK, WORK))
-    brought_up, _ = full_size_mask(small, photo)
-    kept_mask, kept = full_size_mask(small, photo, SNAP)
-    assert not kept and np.array_equal(kept_mask, brought_up)
+    assert_left_as_brought_up(reduce(truth, (WORK, WORK)), photo)
 
 
 def test_a_small_object_is_not_snapped():
     """An object a few working pixels across: the band would be most of it, so its outline stays."""
     truth = blob(14)
     photo = photo_of(truth)
-    small = working_mask(truth, 1)
-    brought_up, _ = full_size_mask(small, photo)
-    kept_mask, kept = full_size_mask(small, photo, SNAP)
-    assert not kept and np.array_equal(kept_mask, brought_up)
+    assert_left_as_brought_up(working_mask(truth, 1), photo)
 
 
 def test_a_mask_at_the_photos_size_is_returned_as_is():
