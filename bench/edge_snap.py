@@ -22,17 +22,18 @@ from datetime import datetime
 from pathlib import Path
 
 import numpy as np
-from PIL import Image
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: bench.blowtorch's helpers
 
 from bench.blowtorch import DATASET, commit, machine, poses_undistortion, reference_mask  # noqa: E402
+from bench.front_end import CACHE  # noqa: E402
+from pipeline.cameras import load_cameras  # noqa: E402
 from pipeline.config import MasksConfig  # noqa: E402
-from pipeline.layout import MASKS, USER_MASKS  # noqa: E402
+from pipeline.layout import CAMERAS_JSON, DECODE, GROUND_TRUTH, MASKS, POSES, USER_MASKS  # noqa: E402
 from pipeline.mask_file import read_mask  # noqa: E402
 from pipeline.masking.scale import edge_snap, full_size_mask, reduce, snap_to_edges  # noqa: E402
 from pipeline.metrics import iou  # noqa: E402
-from pipeline.results import load_masks  # noqa: E402
+from pipeline.results import image_folder, load_decode, load_masks  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "masks_edge_snap.json"
 WORK_SIZE = MasksConfig().work_size
@@ -56,19 +57,20 @@ def blowtorch_views(results: Path):
     """(written mask, photo, reference, scale) per view of a blowtorch front end: the written masks are the
     guided filter's output already, so they are snapped as they are."""
     masks, undistortion = load_masks(results / MASKS), poses_undistortion(results)
+    decoded = load_decode(image_folder(load_cameras(results / POSES / CAMERAS_JSON), results / POSES, None))
     for name in masks.names:
         ours = masks.mask(name)
-        photo = np.array(Image.open(results / "poses" / "images" / f"{name}.png").convert("RGB"))
+        photo = decoded.srgb(name)
         reference = reference_mask(DATASET / USER_MASKS / f"{name}.png", ours.shape[::-1], undistortion)
         yield ours, photo, reference, max(ours.shape) / WORK_SIZE
 
 
 def family_views(scene: Path, truth: Path):
     """(mask halved and brought up, photo, truth, 2) per view of a front-end scene folder."""
-    masks = load_masks(scene / MASKS)
+    masks, decoded = load_masks(scene / MASKS), load_decode(scene / DECODE)
     for name in masks.names:
         full = masks.mask(name)
-        photo = np.array(Image.open(scene / "decode" / "srgb" / f"{name}.png").convert("RGB"))
+        photo = decoded.srgb(name)
         small = reduce(full, (full.shape[0] // 2, full.shape[1] // 2))
         yield full_size_mask(small, photo)[0], photo, read_mask(truth / f"{name}.png", full.shape[::-1]), 2.0
 
@@ -89,7 +91,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--blowtorch", type=Path, help="a bench/blowtorch.py results folder")
     parser.add_argument("--family", type=Path, nargs="*", default=[], help="bench/front_end.py scene folders")
-    parser.add_argument("--truth", type=Path, default=Path("/tmp/orca_front_end"),
+    parser.add_argument("--truth", type=Path, default=CACHE,
                         help="the rendered captures (<scene>/ground_truth/masks)")
     parser.add_argument("--results", type=Path, default=RESULTS)
     args = parser.parse_args()
@@ -98,7 +100,7 @@ def main() -> None:
         sets["blowtorch"] = score(blowtorch_views(args.blowtorch))
     if args.family:
         sets["family"] = score(v for scene in sorted(args.family)
-                               for v in family_views(scene, args.truth / scene.name / "ground_truth" / "masks"))
+                               for v in family_views(scene, args.truth / scene.name / GROUND_TRUTH / MASKS))
     for capture, figures in sets.items():
         print(capture)
         for name, f in figures.items():
