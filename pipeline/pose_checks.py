@@ -39,6 +39,16 @@ figure and a reason a person can read:
    cropped after they were taken keep their EXIF and are as far off with a right model (1.5 for a 3:2 photo
    cropped square, 3 for a crop to an object a third as wide), and the models measured that far off were
    partial ones, which ``poses.min_registered_fraction`` stops.
+7. **Runs that disagree** (:func:`ambiguous`): the mapper is randomized (RANSAC, the order it adds photos in),
+   and where the view graph holds a part of the capture by a few weak or look-alike pairs it can place that
+   part differently from run to run, each placement consistent in itself. On the blowtorch walk-around one run
+   in about eight on the same matches put its lowest ring's 7 photos 23-38 degrees round the object from the
+   photographers' cameras, with as many observations and as small a reprojection error as the right
+   placement, their axes still on the object: none of the checks above can see that. So the matches are mapped
+   again with other seeds (``poses.mapping_runs``), and a camera whose orientation differs by more than
+   ``poses.mapping_max_deg`` from every other run's (:func:`rotation_disagreement`, after the rotation that
+   best aligns the runs' other cameras) is doubted: the photos cannot tell where it was taken. Between runs
+   that agree the blowtorch's cameras differ by 5 degrees at most (its weakest photos; 0.1-0.2 median).
 
 :func:`check_poses` runs them all (the up check on the cameras it is given) and returns a :class:`PoseChecks`
 for ``poses_report.json``. Arrays only; no files, no pycolmap.
@@ -53,6 +63,7 @@ from typing import Any
 
 import numpy as np
 
+from .alignment import mean_rotation, rotation_angle_deg
 from .config import PosesConfig
 from .object_frame import axes_convergence, camera_up, plane_normal, support_plane, window_fraction
 
@@ -73,9 +84,10 @@ class Suspect:
     """One photo whose pose a check doubts."""
 
     name: str
-    check: str  # "path_jump" | "axis_miss" | "looks_away" | "far_out" | "weak_support"
+    check: str  # "path_jump" | "axis_miss" | "looks_away" | "far_out" | "weak_support" | "ambiguous"
     value: float  # the measured figure: step / median step (path_jump), degrees off the axis (axis_miss,
-    # looks_away), distance / median distance (far_out), observations (weak_support)
+    # looks_away), distance / median distance (far_out), observations (weak_support), degrees to the nearest
+    # other run's orientation (ambiguous)
     limit: float  # the threshold it exceeded, same unit
     reason: str
 
@@ -349,6 +361,49 @@ def focal_checks(focal: np.ndarray, prior: np.ndarray, warn_ratio: float) -> lis
             for f, p in pairs]
 
 
+# ------------------------------------------------------------------------------------ runs that disagree
+
+
+def rotation_disagreement(c2w: np.ndarray, other: np.ndarray, max_deg: float, rounds: int = 3) -> np.ndarray:
+    """``(N,)`` degrees between each camera's orientation in ``c2w`` ``(N, 4, 4)`` and in ``other`` ``(N, 4, 4)``
+    (the same cameras from another SfM run, any similarity apart; NaN rows: not in that run, NaN out).
+
+    The runs are aligned by the rotation that best maps ``other``'s orientations onto ``c2w``'s (the chordal
+    mean of the cameras' relative rotations), refitted ``rounds`` times on the cameras within ``max_deg``:
+    a block of cameras placed elsewhere must not tilt the alignment of the rest (7 of 59 cameras 25 degrees
+    off bias a plain mean by 3).
+    """
+    found = ~np.isnan(other[:, 0, 0])
+    out = np.full(len(c2w), np.nan)
+    if found.sum() < 2:
+        return out
+    relative = c2w[found, :3, :3] @ np.swapaxes(other[found, :3, :3], -1, -2)  # other's world -> ours, per camera
+    used = np.ones(int(found.sum()), bool)
+    for _ in range(rounds):
+        align = mean_rotation(relative[used])
+        angles = rotation_angle_deg(np.swapaxes(align, -1, -2) @ relative)
+        if (angles <= max_deg).sum() < 2:
+            break
+        used = angles <= max_deg
+    out[found] = angles
+    return out
+
+
+def ambiguous(names: Sequence[str], disagreement: np.ndarray, max_deg: float) -> list[Suspect]:
+    """Cameras whose orientation differs by more than ``max_deg`` from every other run's that placed them
+    (``disagreement`` ``(N, R)``: :func:`rotation_disagreement` against each of R other runs; NaN: not placed
+    there). See the module doc."""
+    runs = disagreement.shape[1]
+    if not runs:
+        return []
+    nearest = np.where(np.isnan(disagreement), np.inf, disagreement).min(axis=1)
+    return [Suspect(names[i], "ambiguous", float(nearest[i]), max_deg,
+                    f"another run of the mapper on the same matches turned this camera by {nearest[i]:.0f} degrees "
+                    f"(more than poses.mapping_max_deg={max_deg:g}; {runs} other run(s), each aligned on the rest): "
+                    f"its photo is held to the others by too few or look-alike matches to say where it was taken")
+            for i in np.flatnonzero(np.isfinite(nearest) & (nearest > max_deg))]
+
+
 # ----------------------------------------------------------------------------------------------------- up
 
 
@@ -381,7 +436,8 @@ def object_points(points: np.ndarray, c2w: np.ndarray, K: np.ndarray, sizes: np.
 
 def check_poses(names: Sequence[str], c2w: np.ndarray, K: np.ndarray, sizes: np.ndarray, matches: np.ndarray,
                 order: np.ndarray, order_by: str, points: np.ndarray | None, config: PosesConfig,
-                support: np.ndarray | None = None, focal_prior: np.ndarray | None = None) -> PoseChecks:
+                support: np.ndarray | None = None, focal_prior: np.ndarray | None = None,
+                disagreement: np.ndarray | None = None) -> PoseChecks:
     """All the checks on one set of cameras.
 
     Args:
@@ -390,9 +446,12 @@ def check_poses(names: Sequence[str], c2w: np.ndarray, K: np.ndarray, sizes: np.
         order: ``(N,)`` indices into ``names`` in capture order (:func:`capture_order`), ``order_by`` what set it.
         points: ``(M, 3)`` sparse points, or None (no up check).
         config: the thresholds (``jump_ratio``, ``jump_min_match_share``, ``axis_miss_mads``, ``object_window``,
-            ``distance_ratio``, ``min_support_points``, ``focal_warn_ratio``, ``up_max_deg``, ``seed``).
+            ``distance_ratio``, ``min_support_points``, ``focal_warn_ratio``, ``up_max_deg``, ``mapping_max_deg``,
+            ``seed``).
         support: ``(N,)`` observations of 3D points in each photo, or None (no support check: cameras not from SfM).
         focal_prior: ``(N,)`` each photo's prior focal length in pixels (NaN: none), or None (no focal check).
+        disagreement: ``(N, R)`` degrees between each camera and its orientation in R other mapper runs
+            (:func:`rotation_disagreement`; NaN: not placed there), or None (no such runs).
     """
     checks = PoseChecks(order_by)
     ordered = [names[i] for i in order]
@@ -405,7 +464,8 @@ def check_poses(names: Sequence[str], c2w: np.ndarray, K: np.ndarray, sizes: np.
     if len(names) >= MIN_AXES and conditioning >= PARALLEL_AXES:  # else no point to measure distances from
         far, checks.median_distance = far_cameras(names, c2w[:, :3, 3], center, config.distance_ratio)
     weak = [] if support is None else weak_support(names, support, config.min_support_points)
-    checks.suspects = jumps + misses + far + weak
+    unsure = [] if disagreement is None else ambiguous(names, disagreement, config.mapping_max_deg)
+    checks.suspects = jumps + misses + far + weak + unsure
     if focal_prior is not None:
         checks.focal = focal_checks(K[:, 0, 0], focal_prior, config.focal_warn_ratio)
     checks.notes += [note] if note else []

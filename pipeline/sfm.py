@@ -35,7 +35,7 @@ from .layout import SFM_DATABASE, SRGB
 from .log import progress
 from .mask_file import read_mask
 from .object_frame import Posed, find_object
-from .pose_checks import PoseChecks, capture_order, check_poses
+from .pose_checks import PoseChecks, ambiguous, capture_order, check_poses, rotation_disagreement
 from .signals import import_pycolmap
 
 if TYPE_CHECKING:
@@ -80,6 +80,9 @@ class SfmResult:
     mapper: str = "incremental"  # which mapper made the model: "incremental" or "global"
     unregistered: dict[str, str] = field(default_factory=dict)  # image stem -> why it has no camera
     relaxed: list[str] | None = None  # image stems the relaxed second pass registered (None: it did not run)
+    # the model's photos' turn against the other mapper runs (repeat_mapping), and every run's figures
+    disagreement: dict[str, list[float | None]] = field(default_factory=dict)
+    mapping_runs: list[dict[str, Any]] = field(default_factory=list)
 
 
 def colmap_name(name: str) -> str:
@@ -285,61 +288,164 @@ def run_sfm(
              seconds["matching"])
 
     t = time.time()
-    options = _mapper_options(config, groups, threads, len(names))
-    sparse = work / "sparse"
-    sparse.mkdir()
     task = progress.add_task("register photos", total=len(names)) if progress is not None else None
 
     def next_image() -> None:
         if progress is not None:
             progress.advance(task)
 
-    mapper = "incremental" if config.mapper == "auto" else config.mapper
-    if mapper == "incremental":
-        models = pycolmap.incremental_mapping(db_path, image_dir, sparse, options, next_image_callback=next_image)
-        ranked = largest_first(models)
-    else:
-        ranked = global_then_incremental(db_path, image_dir, sparse, config, options, threads, len(names))
-    if config.mapper == "auto" and (not ranked or ranked[0].num_reg_images() < len(names)):
-        log.info("incremental mapping registered %d of %d photos (models: %s); trying the global mapper on the same "
-                 "matches", ranked[0].num_reg_images() if ranked else 0, len(names),
-                 " + ".join(str(r.num_reg_images()) for r in ranked) or "none")
-        found = global_then_incremental(db_path, image_dir, work / "sparse_global", config, options, threads,
-                                        len(names))
-        if found and (not ranked or found[0].num_reg_images() > ranked[0].num_reg_images()):
-            # A warning: where the incremental mapper fails, the view graph is weak, and the global model is
-            # less accurate (1-2 degrees on a tiled room where the incremental one stays under 0.1 on posters).
-            log.warning("the global mapper's model is used (%d photos; the incremental mapper's largest had %d): "
-                        "the photos overlap weakly, so check poses.png and poses_report.json's checks",
-                        found[0].num_reg_images(), ranked[0].num_reg_images() if ranked else 0)
-            ranked, mapper = found, "global"
-    # not in a retry: that one is for photos placed where others look the same, and wants stricter bars, not laxer
-    relaxed = None
-    extend = ranked and ranked[0].num_reg_images() < len(names) and config.relaxed_min_inliers and retry is None
-    needed = relaxed_min_size(len(names), config)
-    if extend and ranked[0].num_reg_images() < needed:
-        log.info("the relaxed pass is skipped: the model holds %d photos, fewer than the %d it needs to extend one "
-                 "(poses.relaxed_min_model)", ranked[0].num_reg_images(), needed)
-    elif extend:
-        more = continued(db_path, image_dir, work / "sparse_relaxed", ranked[0],
-                         relaxed_options(_mapper_options(config, groups, threads, len(names)), config))[0]
-        relaxed = sorted(registered_stems(more) - registered_stems(ranked[0]))
-        if relaxed:
-            log.info("%d more photo(s) registered with relaxed thresholds (%d inlier 2D-3D matches, %.0f %% of "
-                     "them): %s", len(relaxed), config.relaxed_min_inliers, 100 * config.relaxed_min_inlier_ratio,
-                     ", ".join(relaxed))
-            ranked = [more, *ranked[1:]]
+    mapped = map_photos(db_path, image_dir, work, groups, config, threads, len(names), retry, next_image)
     seconds["mapping"] = time.time() - t
-    if not ranked:
+    if not mapped.ranked:
         raise _no_model_error(db_path, names, features, num_verified, folder)
+    t = time.time()
+    mapped, disagreement, mapping_runs = repeat_mapping(mapped, db_path, image_dir, work, groups, config, threads,
+                                                        retry)
+    seconds["repeat_mapping"] = time.time() - t
+    ranked = mapped.ranked
     best = ranked[0]
     others = [sorted(registered_stems(r)) for r in ranked[1:]]
     registered = registered_stems(best)
     why = unregistered_reasons(db_path, names, registered, others, verification_options(config, retry).min_num_inliers)
     result = SfmResult(best, [r.num_reg_images() for r in ranked], others, features, matcher, num_pairs,
-                       num_verified, seconds, mapper, why, relaxed)
+                       num_verified, seconds, mapped.mapper, why, mapped.relaxed, disagreement, mapping_runs)
     _check_registered(result, names, config, folder)
     return result
+
+
+@dataclass(frozen=True)
+class Mapping:
+    """What :func:`map_photos` made."""
+
+    ranked: list[pycolmap.Reconstruction]  # the models, largest first
+    mapper: str  # "incremental" or "global": which mapper made the largest
+    relaxed: list[str] | None  # image stems the relaxed pass added to it (None: it did not run)
+
+
+def map_photos(db_path: Path, image_dir: Path, work: Path, groups: Sequence[CameraGroup], config: PosesConfig,
+               threads: int, n: int, retry: RetryMatching | None, next_image: Any = None,
+               quiet: bool = False) -> Mapping:
+    """Models of the ``n`` photos of a matched database (``work/sparse*``): the incremental mapper; the global
+    mapper on the same matches when that leaves photos out (``poses.mapper`` 'auto'); then the relaxed pass on the
+    largest model. ``next_image``: called as the incremental mapper registers each photo; ``quiet``: log at debug
+    level (a repeated run, :func:`repeat_mapping`)."""
+    pycolmap = import_pycolmap()
+
+    info, warning = (log.debug, log.debug) if quiet else (log.info, log.warning)
+    options = _mapper_options(config, groups, threads, n)
+    sparse = work / "sparse"
+    sparse.mkdir()
+    mapper = "incremental" if config.mapper == "auto" else config.mapper
+    if mapper == "incremental":
+        models = pycolmap.incremental_mapping(db_path, image_dir, sparse, options, next_image_callback=next_image)
+        ranked = largest_first(models)
+    else:
+        ranked = global_then_incremental(db_path, image_dir, sparse, config, options, threads, n)
+    if config.mapper == "auto" and (not ranked or ranked[0].num_reg_images() < n):
+        info("incremental mapping registered %d of %d photos (models: %s); trying the global mapper on the same "
+             "matches", ranked[0].num_reg_images() if ranked else 0, n,
+             " + ".join(str(r.num_reg_images()) for r in ranked) or "none")
+        found = global_then_incremental(db_path, image_dir, work / "sparse_global", config, options, threads, n)
+        if found and (not ranked or found[0].num_reg_images() > ranked[0].num_reg_images()):
+            # A warning: where the incremental mapper fails, the view graph is weak, and the global model is
+            # less accurate (1-2 degrees on a tiled room where the incremental one stays under 0.1 on posters).
+            warning("the global mapper's model is used (%d photos; the incremental mapper's largest had %d): the "
+                    "photos overlap weakly, so check poses.png and poses_report.json's checks",
+                    found[0].num_reg_images(), ranked[0].num_reg_images() if ranked else 0)
+            ranked, mapper = found, "global"
+    # not in a retry: that one is for photos placed where others look the same, and wants stricter bars, not laxer
+    relaxed = None
+    extend = ranked and ranked[0].num_reg_images() < n and config.relaxed_min_inliers and retry is None
+    needed = relaxed_min_size(n, config)
+    if extend and ranked[0].num_reg_images() < needed:
+        info("the relaxed pass is skipped: the model holds %d photos, fewer than the %d it needs to extend one "
+             "(poses.relaxed_min_model)", ranked[0].num_reg_images(), needed)
+    elif extend:
+        more = continued(db_path, image_dir, work / "sparse_relaxed", ranked[0],
+                         relaxed_options(_mapper_options(config, groups, threads, n), config))[0]
+        relaxed = sorted(registered_stems(more) - registered_stems(ranked[0]))
+        if relaxed:
+            info("%d more photo(s) registered with relaxed thresholds (%d inlier 2D-3D matches, %.0f %% of them): %s",
+                 len(relaxed), config.relaxed_min_inliers, 100 * config.relaxed_min_inlier_ratio, ", ".join(relaxed))
+            ranked = [more, *ranked[1:]]
+    return Mapping(ranked, mapper, relaxed)
+
+
+def repeat_mapping(first: Mapping, db_path: Path, image_dir: Path, work: Path, groups: Sequence[CameraGroup],
+                   config: PosesConfig, threads: int,
+                   retry: RetryMatching | None) -> tuple[Mapping, dict[str, list[float | None]], list[dict[str, Any]]]:
+    """The same matches mapped again (:func:`map_photos` in ``work/mapping<k>``, seeds ``poses.seed`` + 1, + 2,
+    ...), and the run the others agree with: a second run always, each further one, up to ``poses.mapping_runs``
+    in all, only while every run so far has cameras turned by more than ``poses.mapping_max_deg`` against all the
+    others (:func:`disputed`). Kept is the run with the most photos not so turned (then the fewest turned, then
+    the earliest): when a second and a third run agree and the first placed a part of the capture elsewhere, the
+    second is kept and no photo is lost. No repeat when ``first`` holds too few photos for the stage to go on.
+
+    Returns:
+        the kept run; ``{image stem: [degrees against each other run, None where it has no camera there]}`` for
+        the kept model's photos (:func:`pipeline.pose_checks.rotation_disagreement`; the checks doubt those
+        turned against all: :func:`pipeline.pose_checks.ambiguous`); per run its seed, photos registered,
+        whether it was kept and the median and largest turn of the kept run's cameras against it.
+    """
+    n = sum(len(g.names) for g in groups)
+    if config.mapping_runs < 2 or first.ranked[0].num_reg_images() < required_registered(n, config):
+        return first, {}, []
+    runs = [first]
+    while len(runs) < config.mapping_runs and (len(runs) == 1 or not any(
+            run.ranked and not doubts for run, doubts in zip(runs, disputed(runs, config)))):
+        seed = config.seed + len(runs)
+        log.info("mapping the same matches again (seed %d) to see that the poses hold (poses.mapping_runs)", seed)
+        folder = work / f"mapping{len(runs) + 1}"
+        folder.mkdir()
+        runs.append(map_photos(db_path, image_dir, folder, groups, config.model_copy(update={"seed": seed}), threads,
+                               n, retry, quiet=True))
+    doubts = disputed(runs, config)
+    undoubted = [(r.ranked[0].num_reg_images() - len(d), -len(d)) if r.ranked else (-1, 0)
+                 for r, d in zip(runs, doubts)]
+    kept = undoubted.index(max(undoubted))
+    if kept:
+        log.warning("mapper run %d (seed %d) is kept: the other runs agree with it, while the first placed %d "
+                    "photo(s) elsewhere (%s)", kept + 1, config.seed + kept, len(doubts[0]), ", ".join(doubts[0][:12]))
+    stems = sorted(registered_stems(runs[kept].ranked[0]))
+    table = turns(runs[kept], [r for i, r in enumerate(runs) if i != kept], stems, config)
+    figures = []
+    for i, run in enumerate(runs):
+        column = table[:, i - (i > kept)] if i != kept else np.zeros(0)
+        found = column[~np.isnan(column)]
+        figures.append({"seed": config.seed + i, "registered": run.ranked[0].num_reg_images() if run.ranked else 0,
+                        "kept": i == kept, "median_deg": float(np.median(found)) if len(found) else None,
+                        "max_deg": float(found.max()) if len(found) else None})
+        if i != kept:
+            log.info("mapper run %d (seed %d): %d photos registered; the kept run's cameras turned against it by %s",
+                     i + 1, config.seed + i, figures[-1]["registered"], "-" if not len(found) else
+                     f"{figures[-1]['median_deg']:.2f} degrees median, {figures[-1]['max_deg']:.1f} at most")
+    return runs[kept], {n: [None if np.isnan(v) else float(v) for v in row] for n, row in zip(stems, table)}, figures
+
+
+def turns(run: Mapping, others: Sequence[Mapping], stems: Sequence[str], config: PosesConfig) -> np.ndarray:
+    """``(N, R)`` degrees each of the photos ``stems`` of ``run``'s model is turned against each of the R
+    ``others``' models (NaN: no camera there; :func:`pipeline.pose_checks.rotation_disagreement`)."""
+    c2w = _cameras_of(run.ranked[0], stems)
+    columns = [rotation_disagreement(c2w, _cameras_of(o.ranked[0], stems) if o.ranked else np.full_like(c2w, np.nan),
+                                     config.mapping_max_deg) for o in others]
+    return np.stack(columns, 1) if columns else np.zeros((len(stems), 0))
+
+
+def disputed(runs: Sequence[Mapping], config: PosesConfig) -> list[list[str]]:
+    """Per run, the photos (stems) whose cameras are turned by more than ``poses.mapping_max_deg`` against every
+    other run that placed them (:func:`pipeline.pose_checks.ambiguous`)."""
+    out = []
+    for i, run in enumerate(runs):
+        stems = sorted(registered_stems(run.ranked[0])) if run.ranked else []
+        table = turns(run, [r for j, r in enumerate(runs) if j != i], stems, config)
+        out.append([s.name for s in ambiguous(stems, table, config.mapping_max_deg)])
+    return out
+
+
+def _cameras_of(rec: pycolmap.Reconstruction, stems: Sequence[str]) -> np.ndarray:
+    """``(N, 4, 4)`` camera-to-world of the photos ``stems`` in ``rec``; NaN where it has no camera."""
+    by_name = {stem_of(im.name): im for im in rec.images.values() if im.has_pose}
+    return np.stack([camera_to_world(by_name[n]) if n in by_name else np.full((4, 4), np.nan) for n in stems])
 
 
 def extract_features(db_path: Path, image_dir: Path, groups: Sequence[CameraGroup],
@@ -807,6 +913,8 @@ def posed_from_sfm(decoded: DecodeArtifacts, names: list[str], calibration: tupl
         "focal_prior_px": {n: None if g.params is None else g.params[0] for g in groups for n in g.names},
         "seconds": {k: round(v, 2) for k, v in sfm.seconds.items()},
         "not_registered_why": sfm.unregistered,
+        "mapping_runs": sfm.mapping_runs,
+        "mapping_disagreement_deg": sfm.disagreement,
         "relaxed_pass": None if sfm.relaxed is None else {
             "what": "photos without a camera after mapping, registered with the absolute pose needing "
             "poses.relaxed_min_inliers inlier 2D-3D matches and relaxed_min_inlier_ratio of them (COLMAP's bars: 30, "
@@ -981,17 +1089,21 @@ def consecutive_matches(db_path: Path, order: Sequence[str]) -> np.ndarray:
 def checks_of(posed: Posed, db_path: Path, order: Sequence[str], order_by: str, config: PosesConfig) -> PoseChecks:
     """:func:`pipeline.pose_checks.check_poses` on the registered photos of one run (``order``: all photos'
     stems in capture order; each photo's support: its model's ``observations_per_image``; its focal length's
-    prior: ``focal_prior_px``)."""
+    prior: ``focal_prior_px``; its turn in other mapper runs: ``mapping_disagreement_deg``)."""
     from .undistort import pinholes
 
     index = {n: i for i, n in enumerate(posed.names)}
     registered = [n for n in order if n in index]
     K, sizes = pinholes(posed.lens)
     observed, prior = posed.stats["observations_per_image"], posed.stats["focal_prior_px"]
+    turned = posed.stats.get("mapping_disagreement_deg") or {}
+    runs = max((len(v) for v in turned.values()), default=0)
+    disagreement = np.array([[np.nan if v is None else v for v in turned.get(n, [None] * runs)] for n in posed.names],
+                            float).reshape(len(posed.names), runs)
     return check_poses(posed.names, posed.c2w, K, sizes, consecutive_matches(db_path, registered),
                        np.array([index[n] for n in registered], int), order_by, posed.points, config,
                        np.array([observed[n] for n in posed.names]),
-                       np.array([np.nan if prior[n] is None else prior[n] for n in posed.names]))
+                       np.array([np.nan if prior[n] is None else prior[n] for n in posed.names]), disagreement)
 
 
 def posed_from_sfm_checked(decoded: DecodeArtifacts, names: list[str],

@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import rotation
+from helpers import random_rotation, rotation
 
 from pipeline.cameras import look_at
 from pipeline.config import PosesConfig
 from pipeline.object_frame import axes_convergence
 from pipeline.pose_checks import (
+    ambiguous,
     axes_misses,
     capture_order,
     check_poses,
@@ -18,6 +19,7 @@ from pipeline.pose_checks import (
     far_cameras,
     focal_checks,
     path_jumps,
+    rotation_disagreement,
     up_check,
     weak_support,
 )
@@ -247,6 +249,72 @@ def test_axes_of_a_forward_facing_capture_are_not_checked():
     K, sizes = intrinsics(len(c2w))
     suspects, _, note = axes_misses(names_of(len(c2w)), c2w, K, sizes, 0.6, 5.0)
     assert suspects == [] and "parallel" in note
+
+
+# ------------------------------------------------------------------------------------ runs that disagree
+
+
+def other_run(c2w: np.ndarray, seed: int, noise_deg: float = 1.0) -> np.ndarray:
+    """The cameras ``c2w`` as another SfM run returns them: in another frame (a similarity) and each turned by
+    up to ``noise_deg`` about its own centre."""
+    rng = np.random.default_rng(seed)
+    out = c2w.copy()
+    for m in out:
+        m[:3, :3] = m[:3, :3] @ rotation(rng.normal(size=3), rng.uniform(0, noise_deg))
+    frame = np.eye(4)
+    frame[:3, :3], frame[:3, 3] = 2.5 * random_rotation(rng), rng.normal(size=3)
+    out = frame @ out
+    out[:, :3, :3] /= 2.5
+    return out
+
+
+def round_the_object(c2w: np.ndarray, which: slice, deg: float) -> np.ndarray:
+    """``c2w`` with the cameras ``which`` carried round the vertical axis through the object by ``deg``: where
+    they still aim at the object, on the orbit, at the wrong place."""
+    out = c2w.copy()
+    turn = np.eye(4)
+    turn[:3, :3] = rotation([0, 0, 1], deg)
+    out[which] = turn @ out[which]
+    return out
+
+
+def test_runs_that_agree_doubt_no_camera():
+    c2w = orbit()
+    disagreement = rotation_disagreement(c2w, other_run(c2w, 1), CONFIG.mapping_max_deg)
+    assert disagreement.max() < 2.0, disagreement.max()  # two cameras' 1-degree noises at most
+    assert ambiguous(names_of(len(c2w)), disagreement[:, None], CONFIG.mapping_max_deg) == []
+
+
+def test_a_block_placed_round_the_object_in_one_run_is_doubted():
+    c2w = orbit()
+    block = slice(10, 17)
+    names = names_of(len(c2w))
+    # The first run put 7 neighbours 25 degrees round the object; another run did not. The block's axes still
+    # meet the object and its path is smooth, so the axis and path checks pass it.
+    first = round_the_object(c2w, block, 25.0)
+    second = other_run(c2w, 1)
+    disagreement = rotation_disagreement(first, second, CONFIG.mapping_max_deg)
+    # aligned on the other 29, not pulled 3-4 degrees toward the block as a plain mean would be
+    assert np.all(np.abs(disagreement[block] - 25.0) < 2.5), disagreement[block]
+    assert np.delete(disagreement, np.arange(10, 17)).max() < 2.0
+    suspects = ambiguous(names, disagreement[:, None], CONFIG.mapping_max_deg)
+    assert [s.name for s in suspects] == names[block] and {s.check for s in suspects} == {"ambiguous"}
+    assert check_poses(names, first, *intrinsics(len(c2w)), steady_matches(len(c2w)), np.arange(len(c2w)),
+                       "file name", None, CONFIG).flagged == []  # what the other checks see
+    checks = check_poses(names, first, *intrinsics(len(c2w)), steady_matches(len(c2w)), np.arange(len(c2w)),
+                         "file name", None, CONFIG, disagreement=disagreement[:, None])
+    assert checks.flagged == names[block]
+    # A third run that agrees with the first on the block clears it (the second was the odd one out), but for
+    # a camera the third did not place: the runs that did disagree about it.
+    third = other_run(first, 2)
+    both = np.stack([disagreement, rotation_disagreement(first, third, CONFIG.mapping_max_deg)], 1)
+    assert ambiguous(names, both, CONFIG.mapping_max_deg) == []
+    third[12] = np.nan
+    both = np.stack([disagreement, rotation_disagreement(first, third, CONFIG.mapping_max_deg)], 1)
+    assert np.isnan(both[12, 1]) and [s.name for s in ambiguous(names, both, CONFIG.mapping_max_deg)] == [names[12]]
+    lost = np.full_like(c2w, np.nan)  # a run that placed none of them doubts nothing
+    assert ambiguous(names, rotation_disagreement(first, lost, CONFIG.mapping_max_deg)[:, None],
+                     CONFIG.mapping_max_deg) == []
 
 
 # --------------------------------------------------------------------------------------------------- up

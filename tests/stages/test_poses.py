@@ -309,6 +309,13 @@ def test_sphere_capture_registers_every_view_accurately(sfm_sphere_capture, sfm_
     assert report["mean_reprojection_error_px"] < 1.0 and report["mean_track_length"] > 2.5
     assert report["camera_groups"][0]["intrinsics_from"].startswith("EXIF")
     assert not report["undistorted"]  # a pinhole renderer: no resampling
+    # the matches mapped a second time with another seed: the same cameras within a fraction of a degree, so
+    # no third run and no doubt
+    first, again = report["mapping_runs"]
+    assert first["kept"] and not again["kept"] and again["seed"] == 1 and again["registered"] == 20, again
+    assert again["max_deg"] < 1.0, again
+    assert sorted(report["mapping_disagreement_deg"]) == sorted(c.name for c in truth.cameras)
+    assert report["checks"]["flagged"] == []
     from pipeline.results import load_poses
 
     cams = load_poses(out).cameras()
