@@ -280,17 +280,17 @@ class PosesConfig(StrictModel):
     )
     mapping_runs: int = Field(
         3, ge=1, le=5, description="map the matches up to this many times (seeds seed, seed+1, ...): a second run "
-        "always, each further one only while some camera of the first run is turned by more than mapping_max_deg "
-        "against every other run so far, and such a camera is doubted at the end. Where a part of the capture hangs "
-        "on a few weak or look-alike pairs the mapper places it differently from run to run (on the blowtorch one "
-        "run in about eight turned its lowest ring 25 degrees round the object, unseen by the other checks). 1: one "
-        "run, no such check. A run costs the mapping time again, not features or matching (the blowtorch's 67 "
-        "photos: 55 s on 2 cores)."
+        "always, each further one only while every run so far has cameras turned by more than mapping_max_deg against "
+        "all the others. The run with the most cameras not so turned is kept, and its turned ones are doubted. Where "
+        "a part of the capture hangs on a few weak or look-alike pairs the mapper places it differently from run to "
+        "run (on the blowtorch one run of 32 turned its lowest ring 25 degrees round the object, unseen by the other "
+        "checks). 1: one run, no such check. A run costs the mapping time again, not features or matching (the "
+        "blowtorch's 67 photos: 55 s on 2 cores)."
     )
     mapping_max_deg: float = Field(
         10.0, gt=0, description="a camera turned by more than this between the kept mapper run and every other run "
-        "is doubted (runs that agree differ by 5 degrees at most on the blowtorch's weakest photos, 0.1-0.2 median; "
-        "the wrong placement was 23-38 off)."
+        "is doubted (the blowtorch's 31 runs that agree differ by 5.1 degrees at most on its weakest photos, 0.0-0.3 "
+        "median; the wrong placement was 23-38 off)."
     )
     retry_matching: bool = Field(
         True, description="when photos are doubted, run SfM again matching only neighbours in capture order with a "
