@@ -340,12 +340,13 @@ def map_photos(db_path: Path, image_dir: Path, work: Path, groups: Sequence[Came
         models = pycolmap.incremental_mapping(db_path, image_dir, sparse, options, next_image_callback=next_image)
         ranked = largest_first(models)
     else:
-        ranked = global_then_incremental(db_path, image_dir, sparse, config, options, threads, n)
+        ranked = global_then_incremental(db_path, image_dir, sparse, config, options, threads, n, info)
     if config.mapper == "auto" and (not ranked or ranked[0].num_reg_images() < n):
         info("incremental mapping registered %d of %d photos (models: %s); trying the global mapper on the same "
              "matches", ranked[0].num_reg_images() if ranked else 0, n,
              " + ".join(str(r.num_reg_images()) for r in ranked) or "none")
-        found = global_then_incremental(db_path, image_dir, work / "sparse_global", config, options, threads, n)
+        found = global_then_incremental(db_path, image_dir, work / "sparse_global", config, options, threads, n,
+                                        info)
         if found and (not ranked or found[0].num_reg_images() > ranked[0].num_reg_images()):
             # A warning: where the incremental mapper fails, the view graph is weak, and the global model is
             # less accurate (1-2 degrees on a tiled room where the incremental one stays under 0.1 on posters).
@@ -600,8 +601,8 @@ def largest_first(models: dict[int, pycolmap.Reconstruction]) -> list[pycolmap.R
     return sorted(models.values(), key=lambda r: r.num_reg_images(), reverse=True)
 
 
-def global_models(db_path: Path, image_dir: Path, out: Path, config: PosesConfig, threads: int,
-                  n: int) -> dict[int, pycolmap.Reconstruction]:
+def global_models(db_path: Path, image_dir: Path, out: Path, config: PosesConfig, threads: int, n: int,
+                  info: Any = log.info) -> dict[int, pycolmap.Reconstruction]:
     """Models of GLOMAP's global mapper (pycolmap.global_mapping) on a matched database, each without the photos
     fewer than ``poses.global_min_observations`` of its 3D points support.
 
@@ -610,7 +611,8 @@ def global_models(db_path: Path, image_dir: Path, out: Path, config: PosesConfig
     it registers a photo however little supports it: one with a few observations can be far off (on a real
     walk-around with 10-30 degree gaps, photos under 30 observations were off by up to 24 degrees, the others
     agreed with the photographers' poses as well as the incremental mapper's). The incremental mapper needs
-    ``abs_pose_min_num_inliers`` (30) 2D-3D inliers to register a photo; the same bar is applied here.
+    ``abs_pose_min_num_inliers`` (30) 2D-3D inliers to register a photo; the same bar is applied here. ``info``
+    logs what is left out.
     """
     pycolmap = import_pycolmap()
 
@@ -622,19 +624,19 @@ def global_models(db_path: Path, image_dir: Path, out: Path, config: PosesConfig
     for rec in models.values():
         weak = [im for im in rec.images.values() if im.has_pose and im.num_points3D < config.global_min_observations]
         if weak:
-            log.info("global mapper: %d photo(s) with fewer than %d observations left out: %s", len(weak),
-                     config.global_min_observations, ", ".join(stem_of(im.name) for im in weak))
+            info("global mapper: %d photo(s) with fewer than %d observations left out: %s", len(weak),
+                 config.global_min_observations, ", ".join(stem_of(im.name) for im in weak))
         for frame_id in {im.frame_id for im in weak}:  # one photo per frame (no rigs here)
             rec.deregister_frame(frame_id)
     return {k: rec for k, rec in models.items() if rec.num_reg_images() >= options.min_model_size}
 
 
 def global_then_incremental(db_path: Path, image_dir: Path, work: Path, config: PosesConfig, options: Any,
-                            threads: int, n: int) -> list[pycolmap.Reconstruction]:
-    """The global mapper's models (:func:`global_models`), the largest :func:`continued` by the incremental
-    mapper (``options``); largest first."""
+                            threads: int, n: int, info: Any = log.info) -> list[pycolmap.Reconstruction]:
+    """The global mapper's models (:func:`global_models`, logging with ``info``), the largest :func:`continued`
+    by the incremental mapper (``options``); largest first."""
     (work / "global").mkdir(parents=True)
-    found = largest_first(global_models(db_path, image_dir, work / "global", config, threads, n))
+    found = largest_first(global_models(db_path, image_dir, work / "global", config, threads, n, info))
     return continued(db_path, image_dir, work / "continued", found[0], options) + found[1:] if found else []
 
 
