@@ -378,9 +378,9 @@ def repeat_mapping(first: Mapping, db_path: Path, image_dir: Path, work: Path, g
     """The same matches mapped again (:func:`map_photos` in ``work/mapping<k>``, seeds ``poses.seed`` + 1, + 2,
     ...), and the run the others agree with: a second run always, each further one, up to ``poses.mapping_runs``
     in all, only while every run so far has cameras turned by more than ``poses.mapping_max_deg`` against all the
-    others (:func:`disputed`). Kept is the run with the most photos not so turned (then the fewest turned, then
-    the earliest): when a second and a third run agree and the first placed a part of the capture elsewhere, the
-    second is kept and no photo is lost. No repeat when ``first`` holds too few photos for the stage to go on.
+    others (:func:`disputed`). Kept is the run with the most photos not so turned (:func:`kept_run`): when a
+    second and a third run agree and the first placed a part of the capture elsewhere, the second is kept and no
+    photo is lost. No repeat when ``first`` holds too few photos for the stage to go on.
 
     Returns:
         the kept run; ``{image stem: [degrees against each other run, None where it has no camera there]}`` for
@@ -400,10 +400,7 @@ def repeat_mapping(first: Mapping, db_path: Path, image_dir: Path, work: Path, g
         folder.mkdir()
         runs.append(map_photos(db_path, image_dir, folder, groups, config.model_copy(update={"seed": seed}), threads,
                                n, retry, quiet=True))
-    doubts = disputed(runs, config)
-    undoubted = [(r.ranked[0].num_reg_images() - len(d), -len(d)) if r.ranked else (-1, 0)
-                 for r, d in zip(runs, doubts)]
-    kept = undoubted.index(max(undoubted))
+    kept, doubts = kept_run(runs, config)
     if kept:
         log.warning("mapper run %d (seed %d) is kept: the other runs agree with it, while the first placed %d "
                     "photo(s) elsewhere (%s)", kept + 1, config.seed + kept, len(doubts[0]), ", ".join(doubts[0][:12]))
@@ -420,7 +417,16 @@ def repeat_mapping(first: Mapping, db_path: Path, image_dir: Path, work: Path, g
             log.info("mapper run %d (seed %d): %d photos registered; the kept run's cameras turned against it by %s",
                      i + 1, config.seed + i, figures[-1]["registered"], "-" if not len(found) else
                      f"{figures[-1]['median_deg']:.2f} degrees median, {figures[-1]['max_deg']:.1f} at most")
-    return runs[kept], {n: [None if np.isnan(v) else float(v) for v in row] for n, row in zip(stems, table)}, figures
+    return runs[kept], {s: [None if np.isnan(v) else float(v) for v in row] for s, row in zip(stems, table)}, figures
+
+
+def kept_run(runs: Sequence[Mapping], config: PosesConfig) -> tuple[int, list[list[str]]]:
+    """Which of several mapper runs on the same matches to keep: the one with the most photos not turned against
+    all the others (:func:`disputed`), then the fewest turned, then the earliest; and each run's turned photos."""
+    doubts = disputed(runs, config)
+    undoubted = [(r.ranked[0].num_reg_images() - len(d), -len(d)) if r.ranked else (-1, 0)
+                 for r, d in zip(runs, doubts)]
+    return undoubted.index(max(undoubted)), doubts
 
 
 def turns(run: Mapping, others: Sequence[Mapping], stems: Sequence[str], config: PosesConfig) -> np.ndarray:

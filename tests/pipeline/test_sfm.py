@@ -7,7 +7,15 @@ import numpy as np
 
 from pipeline.cameras import look_at
 from pipeline.config import PosesConfig
-from pipeline.sfm import equalized_gray, extraction_options, required_registered, sequential_pairs, viewing_pairs
+from pipeline.sfm import (
+    Mapping,
+    equalized_gray,
+    extraction_options,
+    kept_run,
+    required_registered,
+    sequential_pairs,
+    viewing_pairs,
+)
 from pipeline.signals import import_pycolmap
 
 
@@ -96,3 +104,47 @@ def test_a_lower_sift_peak_threshold_finds_features_in_faint_texture():
 
     default, low = features(PosesConfig().sift_peak_threshold), features(0.002)
     assert default < 10 and low > 100, (default, low)
+
+
+def mapper_run(c2w: np.ndarray, names: list[str], frame_seed: int) -> Mapping:
+    """A mapper run's model of the cameras ``c2w`` ``(N, 4, 4)``, in a frame of its own (a rotation, a scale and a
+    shift drawn from ``frame_seed``): a real pycolmap model, as the mapper returns it."""
+    from helpers import random_rotation
+
+    pycolmap = import_pycolmap()
+    rng = np.random.default_rng(frame_seed)
+    frame = np.eye(4)
+    frame[:3, :3], frame[:3, 3] = random_rotation(rng), rng.normal(size=3)
+    rec = pycolmap.Reconstruction()
+    rec.add_camera_with_trivial_rig(pycolmap.Camera(model="PINHOLE", width=640, height=480,
+                                                    params=[500, 500, 320, 240], camera_id=1))
+    for i, (m, name) in enumerate(zip(c2w, names), 1):
+        placed = frame @ m
+        placed[:3, 3] *= 2.0  # the run's scale
+        w2c = np.linalg.inv(placed)
+        rec.add_image_with_trivial_frame(pycolmap.Image(name=f"{name}.png", camera_id=1, image_id=i),
+                                         pycolmap.Rigid3d(pycolmap.Rotation3d(w2c[:3, :3]), w2c[:3, 3]))
+    return Mapping([rec], "incremental", None)
+
+
+def test_the_run_the_others_agree_with_is_kept():
+    """Three mapper runs of a 24-photo orbit: the first carried 6 neighbours 25 degrees round the object, the
+    other two agree. The second is kept whole; the first's 6 are the ones in dispute."""
+    from helpers import rotation
+
+    angles = np.radians(np.arange(0, 360, 15))
+    c2w = np.stack([look_at(np.array([3 * np.cos(a), 3 * np.sin(a), 1.0]), np.zeros(3)) for a in angles])
+    names = [f"IMG_{i:02d}" for i in range(len(c2w))]
+    turn = np.eye(4)
+    turn[:3, :3] = rotation([0, 0, 1], 25.0)
+    wrong = c2w.copy()
+    wrong[5:11] = turn @ wrong[5:11]
+    config = PosesConfig()
+    runs = [mapper_run(wrong, names, 1), mapper_run(c2w, names, 2), mapper_run(c2w, names, 3)]
+    kept, doubts = kept_run(runs, config)
+    assert kept == 1 and doubts == [names[5:11], [], []]
+    # two runs that disagree leave each in dispute with the other: the first is kept, its block doubted
+    kept, doubts = kept_run(runs[:2], config)
+    assert kept == 0 and doubts == [names[5:11], names[5:11]]
+    # runs that agree: the first is kept and nothing is disputed
+    assert kept_run([runs[1], runs[2]], config) == (0, [[], []])
