@@ -63,6 +63,7 @@ class CameraGroup:
     params: tuple[float, ...] | None  # None: COLMAP's guess (focal 1.2 x the longest side)
     source: str  # where the intrinsics come from, for the report
     fixed: bool = False  # calibrated: bundle adjustment keeps them
+    prior: bool = True  # COLMAP takes the focal length in params as known (else it starts there: poses.exif_focal)
 
 
 @dataclass
@@ -458,9 +459,10 @@ def _cameras_of(rec: pycolmap.Reconstruction, stems: Sequence[str]) -> np.ndarra
 def extract_features(db_path: Path, image_dir: Path, groups: Sequence[CameraGroup],
                      extraction: pycolmap.FeatureExtractionOptions, feature_masks: Path | None = None) -> None:
     """SIFT features of the photos of ``groups`` (``image_dir/<name>.png``) into the existing database ``db_path``,
-    one COLMAP camera per group with its intrinsics prior. Each group's images are imported in the order of its
-    names first, so that their ids (which order the matching and mapping) are the same on every run: the
-    extractor's threads number the images they import in the order they finish."""
+    one COLMAP camera per group with its intrinsics (as a prior, or with ``prior`` False as the focal length's
+    start). Each group's images are imported in the order of its names first, so that their ids (which order the
+    matching and mapping) are the same on every run: the extractor's threads number the images they import in the
+    order they finish."""
     pycolmap = import_pycolmap()
     for g in groups:
         reader = pycolmap.ImageReaderOptions()
@@ -475,6 +477,22 @@ def extract_features(db_path: Path, image_dir: Path, groups: Sequence[CameraGrou
             db_path, image_dir, image_names=colmap_names, camera_mode=pycolmap.CameraMode.SINGLE,
             reader_options=reader, extraction_options=extraction, device=pycolmap.Device.auto,
         )
+        if g.params is not None and not g.prior:
+            _focal_as_start(db_path, colmap_names[0])
+
+
+def _focal_as_start(db_path: Path, image: str) -> None:
+    """The camera of ``image`` (its COLMAP name) in ``db_path`` keeps its focal length as the start of the
+    estimate, not as a known value (``camera_params`` marked it as one)."""
+    pycolmap = import_pycolmap()
+
+    db = pycolmap.Database.open(db_path)
+    try:
+        camera = db.read_camera(db.read_image_with_name(image).camera_id)
+        camera.has_prior_focal_length = False
+        db.update_camera(camera)
+    finally:
+        db.close()
 
 
 def extraction_options(config: PosesConfig, threads: int, *,
@@ -834,7 +852,8 @@ def _check_registered(result: SfmResult, names: list[str], config: PosesConfig, 
 
 def camera_groups(decoded: DecodeArtifacts, names: list[str], width: int, height: int, config: PosesConfig,
                   calibration: tuple[str, list[float], Path] | None) -> list[CameraGroup]:
-    """One COLMAP camera per lens and zoom (EXIF make, model, focal length), with its intrinsics prior.
+    """One COLMAP camera per lens and zoom (EXIF make, model, focal length), with its intrinsics: the EXIF focal
+    length as a start or a prior (``poses.exif_focal``), a calibration as a prior.
 
     Args:
         calibration: (COLMAP model, params at the decoded size, its file), from ``orca calibrate``.
@@ -855,10 +874,11 @@ def camera_groups(decoded: DecodeArtifacts, names: list[str], width: int, height
         f35 = key[3]
         if f35:  # 35 mm-equivalent focal length: the long side of the photo spans 36 mm
             f = f35 / 36.0 * max(width, height)
-            params, source = _model_params(model, f, width, height), f"EXIF 35 mm focal length {f35:g} mm (prior)"
+            params = _model_params(model, f, width, height)
+            source = f"EXIF 35 mm focal length {f35:g} mm ({config.exif_focal})"
         else:
             params, source = None, "no EXIF focal length: COLMAP's default guess (1.2 x the longest side)"
-        groups.append(CameraGroup(members, model, params, source))
+        groups.append(CameraGroup(members, model, params, source, prior=config.exif_focal == "prior"))
     if len(groups) > 1:
         log.info("%d cameras (lens/zoom settings from EXIF): %s", len(groups),
                  ", ".join(f"{len(g.names)} photos" for g in groups))

@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
 
 from pipeline.cameras import look_at
 from pipeline.config import PosesConfig
 from pipeline.sfm import (
+    CameraGroup,
     Mapping,
+    colmap_name,
     equalized_gray,
+    extract_features,
     extraction_options,
     kept_run,
     required_registered,
@@ -148,3 +152,29 @@ def test_the_run_the_others_agree_with_is_kept():
     assert kept == 0 and doubts == [names[5:11], names[5:11]]
     # runs that agree: the first is kept and nothing is disputed
     assert kept_run([runs[1], runs[2]], config) == (0, [[], []])
+
+
+@pytest.mark.parametrize("exif_focal", ["start", "prior"])
+def test_an_exif_focal_length_is_a_start_unless_configured_as_a_prior(tmp_path, exif_focal):
+    """COLMAP takes a camera's focal length as known when it is marked as a prior (essential matrices with it);
+    EXIF's whole-millimetre value is only the estimate's start by default. A calibration stays a prior."""
+    pycolmap = import_pycolmap()
+    rng = np.random.default_rng(0)
+    names = ["IMG_0", "IMG_1"]
+    for n in names:
+        texture = cv2.GaussianBlur(rng.uniform(0, 255, (120, 160)).astype(np.uint8), (0, 0), 1.5)
+        cv2.imwrite(str(tmp_path / colmap_name(n)), texture)
+    config = PosesConfig(exif_focal=exif_focal)
+    groups = [CameraGroup(tuple(names), "SIMPLE_RADIAL", (150.0, 80.0, 60.0, 0.0), "EXIF",
+                          prior=config.exif_focal == "prior")]
+    db_path = tmp_path / "database.db"
+    pycolmap.Database.open(db_path).close()
+    extract_features(db_path, tmp_path, groups, extraction_options(config, 1, affine_shape=False))
+    db = pycolmap.Database.open(db_path)
+    try:
+        (camera,) = db.read_all_cameras()
+        assert camera.has_prior_focal_length == (exif_focal == "prior")
+        assert camera.params[0] == 150.0  # the start either way
+        assert all(db.num_keypoints_for_image(im.image_id) > 0 for im in db.read_all_images())
+    finally:
+        db.close()
