@@ -299,7 +299,7 @@ class PosesConfig(StrictModel):
     mapping_max_deg: float = Field(
         10.0, gt=0, description="a camera turned by more than this between the kept mapper run and every other run "
         "is doubted (the blowtorch's 31 runs that agree differ by 5.1 degrees at most on its weakest photos, 0.0-0.3 "
-        "median; the wrong placement was 23-38 off)."
+        "median; the wrong placements measured were 16-38 off)."
     )
     retry_matching: bool = Field(
         True, description="when photos are doubted, run SfM again matching only neighbours in capture order with a "
