@@ -405,12 +405,14 @@ class MasksConfig(StrictModel):
         1.5, gt=0, description="the final masks lose the pieces (wider than a disc of colour_open_px) that some view "
         "sees past along the whole of their ray's way through the hull (trim_seen_through_votes) and whose colour "
         "is this much likelier (natural log of the odds, trim_colour_bins per channel) in the room right around "
-        "the masks than in their cores, both pooled over every view: a gap between the object's parts that too few "
-        "views see through to carve shows the room that most views show beside the object "
-        "(pipeline.masking.colour.trim_room_colours; the blowtorch's every third photo with the reference cameras "
-        "0.826/0.769 -> 0.859/0.812 median/worst view; the synthetic family's scenes -0.005..+0.012 median, "
-        "-0.010..+0.006 worst view; at 1.0 the blowtorch gains more, a sphere on a table's worst view loses 0.018; "
+        "this view's mask than in every view's mask core: a gap between the object's parts that too few views see "
+        "through to carve shows what this view shows beside the object (pipeline.masking.colour.trim_room_colours; "
         "docs/masks.md). Not in the sphere prior's probes. None: off"
+    )
+    trim_capture_log_odds: float = Field(
+        0.0, description="...and only where the colour is also this much likelier in the room around every view's "
+        "mask than in their cores: a part coloured like the room behind it in one photo (a dark burner against dark "
+        "wood) has the object's colours over the capture. 0: at least as common in the room as on the object"
     )
     trim_colour_bins: int = Field(16, ge=2, le=64, description="...colour histograms with this many bins per channel")
     outline_reach_px: int = Field(

@@ -8,9 +8,9 @@ shows as well. So a pixel GrabCut would take as certain object is left to it as 
 colour is far more frequent in the certain background around the object than in the hull's deep core (its log
 odds, from colour histograms of the two).
 
-The same odds, pooled over the whole capture, trim the final masks where some view sees through the hull
-(:func:`trim_room_colours`): the room is the same room in every view, so the wedge a few views keep is outvoted by
-the many that show it beside the object.
+The same odds trim the final masks where some view sees through the hull (:func:`trim_room_colours`): a gap
+shows what the view shows beside the object, and the object's colours, pooled over the whole capture, are not
+that.
 """
 
 from __future__ import annotations
@@ -90,31 +90,43 @@ def mask_samples(mask: np.ndarray, core_px: int, band_px: tuple[int, int]) -> tu
 
 
 def trim_room_colours(images: Sequence[np.ndarray], masks: Sequence[np.ndarray],
-                      trimmable: Sequence[np.ndarray | None], bins: int,
-                      log_odds: float, open_px: int, core_px: int, band_px: tuple[int, int], min_pixels: int
-                      ) -> list[np.ndarray]:
+                      trimmable: Sequence[np.ndarray | None], bins: int, log_odds: float, capture_log_odds: float,
+                      open_px: int, core_px: int, band_px: tuple[int, int], min_pixels: int) -> list[np.ndarray]:
     """The ``(H, W)`` bool ``masks`` of the ``(H, W, 3)`` uint8 ``images`` less the pieces coloured like the room
-    within each view's ``(H, W)`` bool ``trimmable`` region (None: the view is left as it is): wider than a disc of
-    ``open_px`` and with colour :func:`log_odds_table` above ``log_odds`` (averaged over that disc), the
-    histograms pooled over all views -- the object's from every mask eroded by ``core_px``, the room's from the
-    ring ``band_px`` outside it (:func:`mask_samples`). The wedge of floor a few views keep is the room most views
-    show beside the object; a mirror shows the room too, over its core as well, and a glossy rim in a band
-    (thin, or in no gap the views see through: the caller's ``trimmable``). Unchanged where either pooled sample
-    has fewer than ``min_pixels``."""
+    within each view's ``(H, W)`` bool ``trimmable`` region (None: the view is left as it is), wider than a disc of
+    ``open_px``. The object's colours are pooled over all views (every mask eroded by ``core_px``), and a piece
+    goes where its colour (:func:`log_odds_table`, ``bins`` per channel, averaged over that disc) is
+
+    * ``log_odds`` likelier in this view's room, the ring ``band_px`` outside its mask (:func:`mask_samples`),
+      than on the object: a gap shows what lies behind the object in this view, and that is what this view shows
+      beside it -- the blowtorch's low views see a white cabinet through the gap between handle and tank, a colour
+      the rest of the capture, which sees the carpet around the object, rarely shows beside it;
+    * and ``capture_log_odds`` likelier in the room around every view's mask than on the object: a part coloured
+      like the room behind it in one view (a dark burner against dark wood in an underexposed photo) has the
+      object's colours over the whole capture.
+
+    A mirror shows the room too, over its core as well, and a glossy rim in a band (thin, or in no gap the views
+    see through: the caller's ``trimmable``). A view whose ring has fewer than ``min_pixels`` uses the pooled ring;
+    unchanged where either pooled sample has fewer."""
     n = bins**3
     indices = [colour_index(im, bins) for im in images]
-    room, obj = np.zeros(n, np.int64), np.zeros(n, np.int64)
+    rooms, obj = [], np.zeros(n, np.int64)
     for index, mask in zip(indices, masks):
         core, band = mask_samples(mask, core_px, band_px)
         obj += np.bincount(index[core], minlength=n)
-        room += np.bincount(index[band], minlength=n)
+        rooms.append(np.bincount(index[band], minlength=n))
+    room = np.sum(rooms, axis=0)
     if obj.sum() < min_pixels or room.sum() < min_pixels:
         return list(masks)
-    table = log_odds_table(room, obj)
+    capture = log_odds_table(room, obj)
     out = []
-    for index, mask, where in zip(indices, masks, trimmable):
+    for index, mask, where, own in zip(indices, masks, trimmable, rooms):
         if where is None:
             out.append(mask)
             continue
-        out.append(mask & ~room_pieces(table[index], mask & where, log_odds, open_px))
+        view = log_odds_table(own, obj) if own.sum() >= min_pixels else capture
+        region = mask & where
+        room_like = (room_pieces(view[index], region, log_odds, open_px)
+                     & room_pieces(capture[index], region, capture_log_odds, open_px))
+        out.append(mask & ~room_like)
     return out

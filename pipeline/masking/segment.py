@@ -494,8 +494,8 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
                                                     for i in auto], lambda: None)))
         trimmable = [hulls[i] & ~firm[i] if i in firm else None for i in range(n)]
         final = trim_room_colours([v.image for v in views], final, trimmable, opts.trim_colour_bins,
-                                  opts.trim_colour_log_odds, opts.colour_open_px, opts.trim_core_px,
-                                  opts.trim_band_px, opts.colour_min_pixels)
+                                  opts.trim_colour_log_odds, opts.trim_capture_log_odds, opts.colour_open_px,
+                                  opts.trim_core_px, opts.trim_band_px, opts.colour_min_pixels)
     if opts.outline_reach_px > 0:
         final = [m if i in fixed else snap_outline(views[i].image, m, opts.outline_reach_px, opts.outline_contrast,
                                                    opts.outline_margin, opts.outline_residual, backgrounds[i])

@@ -86,6 +86,7 @@ class SegmentOptions:
     colour_min_pixels: int = 50
     colour_open_px: int = 2
     trim_colour_log_odds: float | None = 1.5
+    trim_capture_log_odds: float = 0.0
     trim_colour_bins: int = 16
     trim_core_px: int = 6
     trim_band_px: tuple[int, int] = (3, 18)

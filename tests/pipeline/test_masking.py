@@ -11,7 +11,14 @@ import numpy as np
 import pytest
 
 from pipeline.cameras import look_at
-from pipeline.masking.colour import colour_log_odds, release_room_colours, trim_room_colours
+from pipeline.masking.colour import (
+    colour_index,
+    colour_log_odds,
+    log_odds_table,
+    mask_samples,
+    release_room_colours,
+    trim_room_colours,
+)
 from pipeline.masking.grabcut import grabcut, hull_seeds
 from pipeline.masking.hull import (
     carve,
@@ -1042,13 +1049,53 @@ def test_the_final_masks_lose_a_wedge_of_the_room_and_keep_a_rim_and_a_mirrored_
         masks.append(disc_ | wedge if v in (0, 1, 5) else disc_.copy())
     trimmable = [np.ones_like(disc_)] * 5 + [None]
     trimmable[1] = ~wedge  # in view 1 every view is taken to see the wedge as solid object
-    out = trim_room_colours(images, masks, trimmable, 16, 1.0, 2, 6, (3, 18), 50)
+    out = trim_room_colours(images, masks, trimmable, 16, 1.0, 0.0, 2, 6, (3, 18), 50)
     # what stays is the sliver where the wedge meets the disc, narrower than the opening's disc
     assert (out[0] & wedge).sum() < 0.25 * wedge.sum()
     assert (out[1] == masks[1]).all()
     for v in range(5):
         assert (out[v] & disc_).sum() > 0.995 * disc_.sum(), v  # the ring and the wall's patch included
     assert (out[5] == masks[5]).all()
+
+
+def test_a_gap_goes_where_it_shows_the_room_beside_the_object_in_its_own_view_and_a_part_coloured_so_stays():
+    """Sixteen views of a brass disc with a white highlight and a dark knob. Fifteen see a red carpet around it; the
+    last, a low view, sees a white cabinet above the horizon and dark wood below, and its mask keeps a wedge of
+    cabinet beside the disc. Pooled over the capture, white is about as common around the masks as on the object
+    (the highlight), so the capture's room alone would keep the wedge; in the low view's own ring it is far
+    likelier than on the object, and the wedge goes. The knob is as dark as that view's wood, but over the
+    capture the dark colour is the object's: it stays (without the capture's check it would go)."""
+    rng = np.random.default_rng(3)
+    yy, xx = np.mgrid[:120, :160]
+    disc_ = (yy - 60) ** 2 + (xx - 70) ** 2 < 30**2
+    highlight = (np.abs(yy - 52) < 4) & (np.abs(xx - 62) < 4)  # 49 px, 3 % of a core
+    knob = (np.abs(yy - 66) < 5) & (np.abs(xx - 74) < 5)  # 81 px, 4 % of a core
+    wedge = (xx >= 95) & (xx < 112) & (yy >= 30) & (yy < 58) & ~disc_
+    carpet, cabinet, wood, brass = (150, 40, 60), (225, 225, 220), (60, 40, 30), (170, 130, 60)
+    images, masks = [], []
+    for v in range(16):
+        room = np.broadcast_to(carpet, (120, 160, 3)) if v < 15 else np.where((yy < 60)[..., None], cabinet, wood)
+        colours = np.where(disc_[..., None], brass, room)
+        colours = np.where(highlight[..., None], cabinet, colours)
+        colours = np.where(knob[..., None], wood, colours)
+        images.append(np.clip(rng.normal(colours, 6), 0, 255).astype(np.uint8))
+        masks.append(disc_ | wedge if v == 15 else disc_.copy())
+    trimmable = [np.ones_like(disc_)] * 16
+    args = (16, 1.5)  # 16 bins per channel, log odds 1.5
+    out = trim_room_colours(images, masks, trimmable, *args, 0.0, 1, 6, (3, 18), 50)
+    assert (out[15] & wedge).sum() < 0.25 * wedge.sum()
+    assert (out[15] & disc_).sum() > 0.99 * disc_.sum()
+    for v in range(15):
+        assert (out[v] == masks[v]).all(), v
+    # the capture's room alone: the wedge's colour is not 1.5 likelier there than on the object
+    index = [colour_index(im, 16) for im in images]
+    samples = [mask_samples(m, 6, (3, 18)) for m in masks]
+    core = sum(np.bincount(i[c], minlength=16**3) for i, (c, _) in zip(index, samples))
+    room = sum(np.bincount(i[r], minlength=16**3) for i, (_, r) in zip(index, samples))
+    assert np.median(log_odds_table(room, core)[index[15][wedge]]) < 1.5
+    # without the capture's check the knob goes with the wedge
+    unchecked = trim_room_colours(images, masks, trimmable, *args, -np.inf, 1, 6, (3, 18), 50)
+    assert (unchecked[15] & knob).sum() < 0.5 * knob.sum()
 
 
 def test_a_plane_keeps_its_points_in_the_spheres_frame_and_back():
