@@ -61,7 +61,7 @@ from ..artifacts import atomic_dir, check_output_dir, read_stage_json, write_jso
 from ..cameras import load_cameras, save_cameras
 from ..colmap_model import model_files, model_folder, model_points
 from ..config import MasksConfig, add_config_arguments, config_from_arguments
-from ..errors import InputError
+from ..errors import InputError, OrcaError
 from ..imageio import write_png
 from ..layout import (
     CAMERAS_JSON,
@@ -221,6 +221,13 @@ def run_masks(
                 prior, grown = outgrown(prior, seg.masks, views, opts, "segmentation")
             final, plane, rounds, labelled = seg.masks, seg.plane, seg.rounds, seg.track_labels
             beside = seg.unexplained_beside
+            if not any(m.any() for i, m in enumerate(final) if i not in fixed):
+                raise OrcaError(
+                    f"the automatic masks found the object in none of the {len(views) - len(fixed)} photos they "
+                    "segmented: their visual hull emptied in the rounds (the cues and the cameras disagree); nothing "
+                    "was written", poses_dir / CAMERAS_JSON,
+                    fix="check the cameras (poses/poses_report.json and its overlays), and give your masks for some "
+                    "or all photos in CAPTURE/masks/<name>.png (white = object) or with --user-masks DIR")
         if beside is not None and beside["retried"]:
             lost = (f"the first masks left out, beside them, pixels no background explains "
                     f"({100 * beside['median']:.0f} % of a mask's area, median view)")

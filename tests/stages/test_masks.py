@@ -108,6 +108,28 @@ def test_no_support_plane_is_a_warning_in_the_report(tiny_capture, tiny_decode, 
     assert not any("no support plane" in w for w in load_masks(tmp_path / "user").report["warnings"])
 
 
+def test_masks_that_find_the_object_nowhere_stop_the_stage_and_write_nothing(tiny_capture, tiny_decode, tmp_path,
+                                                                            monkeypatch):
+    """When the rounds' hull empties (on a poster floor a torus's masks collapsed this way with SfM's cameras), every
+    automatic mask is empty: the stage stops with what to do instead of writing empty masks that training cannot
+    use."""
+    import pipeline.stages.masks as stage
+    from pipeline.errors import OrcaError
+    from pipeline.masking.segment import Segmentation
+
+    def nothing_found(views, opts, **kwargs):
+        empty = [np.zeros(v.shape, bool) for v in views]
+        return Segmentation(empty, empty, empty, [None] * len(views), [None] * len(views), None,
+                            np.zeros((2, 2, 2), np.float32))
+
+    poses = known_poses(tiny_capture, tiny_decode, tmp_path / "poses")
+    monkeypatch.setattr(stage, "segment", nothing_found)
+    with pytest.raises(OrcaError, match="found the object in none of the 4 photos") as err:
+        run_masks(tiny_capture, poses, tmp_path / "masks", MasksConfig(user_masks="ignore"))
+    assert "CAPTURE/masks" in str(err.value)
+    assert not (tmp_path / "masks").exists()
+
+
 def test_user_masks_follow_the_poses_stage_undistortion(tiny_capture, tiny_decode, tmp_path):
     """A user draws on the photos; when the poses stage resampled them to pinhole, the masks must be resampled
     the same way, or they are off by the lens' shift (a few pixels towards the corners)."""
