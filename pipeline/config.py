@@ -486,6 +486,18 @@ class MasksConfig(StrictModel):
         "surface behind the sphere (the ray passes the object empty): a gap between the object's parts that a few "
         "views see the room through is carved by fewer views than carve_share (see docs/masks.md)"
     )
+    colour_vote_odds: float | None = Field(
+        1.0, gt=0, description="in the rounds' carves, a background vote from a thin piece a view's GrabCut cut off "
+        "the hull (see colour_vote_thin_px) counts its colour's log odds of background over object (GrabCut's own "
+        "colour models) over this, clipped to [0, 1]: GrabCut's smoothness joins a thin part coloured like the "
+        "object (a vase's neck, a wire stand) to the background, and carved in every round the hull loses it "
+        "(null: every vote counts)"
+    )
+    colour_vote_thin_px: int = Field(
+        3, ge=0, description="colour_vote_odds weighs only the pieces GrabCut cut off the hull that a disc of this "
+        "radius does not fit in: a wide piece is a gap of room the hull kept (between a handle and a tank), whose "
+        "colour the object's model, learned from that hull, also holds (0: every piece)"
+    )
     dark_level: int = Field(
         48, ge=0, le=255, description="pixels whose brightest sRGB channel is at most this are dark (doubtful_vote)"
     )

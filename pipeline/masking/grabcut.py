@@ -21,10 +21,19 @@ def grabcut(image: np.ndarray, seeds: np.ndarray, iterations: int) -> np.ndarray
     """``(H, W)`` bool object mask from OpenCV GrabCut on ``seeds`` (``cv2.GC_*`` labels), cropped to the
     seeds' uncertain region plus context so that the colour models are local and the run is fast. A seed map
     without certain object or any uncertain pixel is returned as is (GrabCut needs both classes)."""
+    return grabcut_odds(image, seeds, iterations, odds=False)[0]
+
+
+def grabcut_odds(image: np.ndarray, seeds: np.ndarray, iterations: int, odds: bool = True
+                 ) -> tuple[np.ndarray, np.ndarray | None]:
+    """:func:`grabcut`'s mask and, with ``odds``, ``(H, W)`` float32 the colour's log odds of background over object
+    under the colour models GrabCut ended with (:func:`gmm_log_likelihood`): what the colour alone says of each
+    pixel, before the smoothness term joins it to its neighbours. +inf where the seeds are certain (GrabCut did
+    not decide them) and outside the crop; None when GrabCut did not run."""
     fg = (seeds == cv2.GC_FGD) | (seeds == cv2.GC_PR_FGD)
     unsure = (seeds == cv2.GC_PR_FGD) | (seeds == cv2.GC_PR_BGD)
     if not unsure.any() or not fg.any() or not ((seeds == cv2.GC_BGD) | (seeds == cv2.GC_PR_BGD)).any():
-        return fg
+        return fg, None
     ys, xs = np.nonzero(unsure | (seeds == cv2.GC_FGD))
     h, w = seeds.shape
     m = max(8, int(0.25 * max(xs.max() - xs.min(), ys.max() - ys.min())))
@@ -44,12 +53,40 @@ def grabcut(image: np.ndarray, seeds: np.ndarray, iterations: int) -> np.ndarray
         cv2.grabCut(bgr, crop, None, bgd, fgd, iterations, cv2.GC_INIT_WITH_MASK)
     except cv2.error as e:  # a degenerate colour model (e.g. a single colour): keep the seeds
         log.debug("GrabCut failed (%s); seeds kept", e)
-        return fg
+        return fg, None
     finally:
         cv2.setNumThreads(threads)
     out = np.zeros((h, w), bool)
     out[y0:y1, x0:x1] = (crop == cv2.GC_FGD) | (crop == cv2.GC_PR_FGD)
-    return out
+    if not odds:
+        return out, None
+    pixels = bgr.reshape(-1, 3).astype(np.float64)
+    local = (gmm_log_likelihood(bgd, pixels) - gmm_log_likelihood(fgd, pixels)).reshape(bgr.shape[:2])
+    colour = np.full((h, w), np.inf, np.float32)
+    colour[y0:y1, x0:x1] = local
+    colour[~unsure] = np.inf
+    return out, colour
+
+
+GMM_COMPONENTS = 5  # OpenCV GrabCut's colour models: 5 Gaussians, stored as weights, means (3), covariances (3x3)
+GMM_MIN_VARIANCE = 1e-3  # keeps a flat colour's covariance invertible (8-bit colour units squared)
+
+
+def gmm_log_likelihood(model: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+    """``(N,)`` log density of ``pixels`` ``(N, 3)`` (BGR, 0-255) under an OpenCV GrabCut colour model ``(1, 65)``
+    (as ``cv2.grabCut`` leaves it: 5 weights, then 5 means of 3, then 5 covariances of 3x3)."""
+    k = GMM_COMPONENTS
+    flat = model.ravel()
+    weights, means, covs = flat[:k], flat[k:4 * k].reshape(k, 3), flat[4 * k:13 * k].reshape(k, 3, 3)
+    density = np.zeros(len(pixels))
+    for w, mu, cov in zip(weights, means, covs):
+        if w <= 0:
+            continue
+        cov = cov + GMM_MIN_VARIANCE * np.eye(3)
+        d = pixels - mu
+        q = np.einsum("ni,ij,nj->n", d, np.linalg.inv(cov), d)
+        density += w * np.exp(-0.5 * q) / np.sqrt((2 * np.pi) ** 3 * np.linalg.det(cov))
+    return np.log(density + np.finfo(np.float64).tiny)
 
 
 def first_seeds(sphere: np.ndarray, background: np.ndarray, seed_radius: float,

@@ -14,7 +14,7 @@ from ..config import MasksConfig
 from ..metrics import iou
 from ..object_frame import camera_up
 from .colour import release_room_colours, trim_room_colours
-from .grabcut import first_seeds, grabcut, hull_seeds
+from .grabcut import first_seeds, grabcut, grabcut_odds, hull_seeds
 from .hull import (
     OUTSIDE_VOTES,
     carve,
@@ -70,7 +70,8 @@ def _released(occluded: np.ndarray | None, front: np.ndarray | None, through: np
 def vote_weights(views: Sequence[View], backgrounds: Sequence[np.ndarray], floors: Sequence[np.ndarray | None],
                  fixed: dict[int, np.ndarray], opts: SegmentOptions,
                  unexplained: Sequence[np.ndarray | None] | None = None,
-                 confirmed: Sequence[np.ndarray | None] | None = None) -> list[np.ndarray | None]:
+                 confirmed: Sequence[np.ndarray | None] | None = None,
+                 colour_odds: Sequence[np.ndarray | None] | None = None) -> list[np.ndarray | None]:
     """Per view, ``(H, W)`` float32 what a background vote counts in :func:`carve` (None: 1 everywhere).
     ``doubtful_vote`` on dark pixels (brightest channel <= ``dark_level``) that no evidence confirms as background
     (outside the sphere, swept, floor): a dark object bottom and its dark contact shadow look alike, and views
@@ -91,6 +92,8 @@ def vote_weights(views: Sequence[View], backgrounds: Sequence[np.ndarray], floor
             weight[confirmed[i]] = opts.confirmed_vote
         if unexplained is not None and unexplained[i] is not None:
             weight[unexplained[i]] = np.minimum(weight[unexplained[i]], opts.unexplained_vote)
+        if opts.colour_vote_odds is not None and colour_odds is not None and colour_odds[i] is not None:
+            weight *= np.clip(colour_odds[i] / opts.colour_vote_odds, 0.0, 1.0)
         out.append(weight)
     return out
 
@@ -160,8 +163,8 @@ def view_evidence(view: View, near: Sequence[View] | None, nbrs: Sequence[View],
     return occluded, beyond, floor, not_floor
 
 
-def view_masks(run_views: MapViews, fn: Callable[..., np.ndarray], tasks: Sequence[tuple[Any, ...]],
-               fixed: dict[int, np.ndarray], step: Callable[[str], None]) -> list[np.ndarray]:
+def view_masks(run_views: MapViews, fn: Callable[..., Any], tasks: Sequence[tuple[Any, ...]],
+               fixed: dict[int, Any], step: Callable[[str], None]) -> list[Any]:
     """Every view's ``(H, W)`` bool mask: the user's where ``fixed``, else ``fn(*task)`` by ``run_views`` with the
     next of ``tasks`` (one per view not fixed, in order); a "segment" step per view."""
     made = iter(run_views(fn, tasks, lambda: step("segment")))
@@ -394,7 +397,7 @@ def contact_band(view: View, depth: np.ndarray, plane: Plane, height: float) -> 
 def round_mask(image: np.ndarray, hull: np.ndarray, released: np.ndarray | None, background: np.ndarray,
                floor: np.ndarray | None, clipped: np.ndarray | None, objects: np.ndarray | None, core_fraction: float,
                opts: SegmentOptions, core_hull: np.ndarray | None = None, contact: np.ndarray | None = None
-               ) -> np.ndarray:
+               ) -> tuple[np.ndarray, np.ndarray | None]:
     """One view's GrabCut mask ``(H, W)`` bool in a round: seeded by the hull's reprojection ``hull``
     (:func:`.grabcut.hull_seeds`: its core -- or ``core_hull``'s, a tighter hull's reprojection -- and the hull's
     ``contact`` band with the support plane forced as object but where ``released``), the forced core's pixels
@@ -404,7 +407,12 @@ def round_mask(image: np.ndarray, hull: np.ndarray, released: np.ndarray | None,
     if opts.core_colour_log_odds is not None:
         seeds = release_room_colours(image, seeds, opts.core_fraction, opts.colour_ring_px, opts.colour_bins,
                                      opts.core_colour_log_odds, opts.colour_min_pixels, opts.colour_open_px)
-    return grabcut(image, seeds, opts.grabcut_iterations)
+    mask, odds = grabcut_odds(image, seeds, opts.grabcut_iterations, odds=opts.colour_vote_odds is not None)
+    if odds is not None and opts.colour_vote_thin_px > 0:
+        lost = (hull & ~mask).astype(np.uint8)
+        thick = cv2.morphologyEx(lost, cv2.MORPH_OPEN, disc(opts.colour_vote_thin_px)) > 0
+        odds[thick] = np.inf
+    return mask, odds
 
 
 def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixed: dict[int, np.ndarray] | None = None,
@@ -426,8 +434,9 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
     volume = np.full((opts.hull_resolution,) * 3, OUTSIDE_VOTES, np.float32)
     through: list[np.ndarray | None] = [None] * n
     fronts: list[np.ndarray | None] = [None] * n
+    odds: list[np.ndarray | None] | None = None
     for r in range(opts.rounds):
-        weights = vote_weights(views, backgrounds, floors, fixed, opts, unexplained, evidence.beyond)
+        weights = vote_weights(views, backgrounds, floors, fixed, opts, unexplained, evidence.beyond, odds)
         volume = stand_on_plane(carve(masks, pixels, index, opts.hull_resolution, weights, run_views), plane,
                                 opts.stand_height)
         votes = carve_votes(opts, n)
@@ -466,7 +475,8 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
         tasks = [(v.image, hulls[i], _released(occluded[i], fronts[i], through[i], opts), backgrounds[i], floors[i],
                   v.clipped, evidence.objects[i], core, opts, cores[i], contacts[i])
                  for i, v in enumerate(views) if i not in fixed]
-        new = view_masks(run_views, round_mask, tasks, fixed, step)
+        made = view_masks(run_views, round_mask, tasks, {i: (m, None) for i, m in fixed.items()}, step)
+        new, odds = [m for m, _ in made], [o for _, o in made]
         agreement = [iou(a, b) for a, b in zip(new, hulls)]
         change = [iou(a, b) for a, b in zip(new, masks)]
         rounds.append({"agreement_median": float(np.median(agreement)), "agreement_min": float(np.min(agreement)),

@@ -123,6 +123,8 @@ class SegmentOptions:
     seed_radius: float = 0.3
     doubtful_vote: float = 0.5
     confirmed_vote: float = 3.0
+    colour_vote_odds: float | None = 1.0
+    colour_vote_thin_px: int = 3
     unexplained_vote: float = 1.0
     unexplained_max_rate: float = 0.4
     unexplained_retry_share: float = 0.4

@@ -975,8 +975,8 @@ def test_a_bottom_rim_mirroring_the_carpet_is_kept_when_the_contact_band_is_forc
     image = image.astype(np.uint8)
     none = np.zeros_like(disc_)
     opts = SegmentOptions()
-    without = round_mask(image, disc_, None, none, None, None, None, 0.0, opts)
-    forced = round_mask(image, disc_, None, none, None, None, None, 0.0, opts, contact=disc_ & (yy > 68))
+    without = round_mask(image, disc_, None, none, None, None, None, 0.0, opts)[0]
+    forced = round_mask(image, disc_, None, none, None, None, None, 0.0, opts, contact=disc_ & (yy > 68))[0]
     assert (without & rim).mean() / rim.mean() < 0.5
     assert (forced & rim).mean() / rim.mean() > 0.95 and iou(forced, disc_) > 0.97
 
