@@ -401,18 +401,28 @@ def round_mask(image: np.ndarray, hull: np.ndarray, released: np.ndarray | None,
     """One view's GrabCut mask ``(H, W)`` bool in a round: seeded by the hull's reprojection ``hull``
     (:func:`.grabcut.hull_seeds`: its core -- or ``core_hull``'s, a tighter hull's reprojection -- and the hull's
     ``contact`` band with the support plane forced as object but where ``released``), the forced core's pixels
-    coloured like the room beside the object released (:func:`.colour.release_room_colours`)."""
+    coloured like the room beside the object released (:func:`.colour.release_room_colours`); with
+    ``colour_vote_odds``, also its colour odds on the thin pieces it cut off the hull (:func:`thin_cut_odds`; else
+    None)."""
     seeds = hull_seeds(hull, released, background, floor, opts.core_erode_px, opts.band_px, clipped, objects,
                        core_fraction, core_hull, contact)
     if opts.core_colour_log_odds is not None:
         seeds = release_room_colours(image, seeds, opts.core_fraction, opts.colour_ring_px, opts.colour_bins,
                                      opts.core_colour_log_odds, opts.colour_min_pixels, opts.colour_open_px)
     mask, odds = grabcut_odds(image, seeds, opts.grabcut_iterations, odds=opts.colour_vote_odds is not None)
-    if odds is not None and opts.colour_vote_thin_px > 0:
-        lost = (hull & ~mask).astype(np.uint8)
-        thick = cv2.morphologyEx(lost, cv2.MORPH_OPEN, disc(opts.colour_vote_thin_px)) > 0
-        odds[thick] = np.inf
-    return mask, odds
+    return mask, thin_cut_odds(hull, mask, odds, opts.colour_vote_thin_px) if odds is not None else None
+
+
+def thin_cut_odds(hull: np.ndarray, mask: np.ndarray, odds: np.ndarray, thin_px: int) -> np.ndarray:
+    """``(H, W)`` float32: the colour ``odds`` (:func:`.grabcut.grabcut_odds`) on the pieces the GrabCut ``mask``
+    cut off the ``hull`` (both ``(H, W)`` bool) that a disc of ``thin_px`` does not fit in, +inf on the wider ones
+    (0: on every piece). A thin piece is a part GrabCut's smoothness joined to the background; a wide one a gap
+    of room the hull kept, which the object's colour model, learned from that hull, also holds."""
+    if thin_px <= 0:
+        return odds
+    cut = (hull & ~mask).astype(np.uint8)
+    wide = cv2.morphologyEx(cut, cv2.MORPH_OPEN, disc(thin_px)) > 0
+    return np.where(wide, np.float32(np.inf), odds).astype(np.float32)
 
 
 def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixed: dict[int, np.ndarray] | None = None,
