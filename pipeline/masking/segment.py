@@ -165,8 +165,9 @@ def view_evidence(view: View, near: Sequence[View] | None, nbrs: Sequence[View],
 
 def view_masks(run_views: MapViews, fn: Callable[..., Any], tasks: Sequence[tuple[Any, ...]],
                fixed: dict[int, Any], step: Callable[[str], None]) -> list[Any]:
-    """Every view's ``(H, W)`` bool mask: the user's where ``fixed``, else ``fn(*task)`` by ``run_views`` with the
-    next of ``tasks`` (one per view not fixed, in order); a "segment" step per view."""
+    """Every view's ``(H, W)`` bool mask (or what ``fn`` returns with it): ``fixed``'s where given (the user's),
+    else ``fn(*task)`` by ``run_views`` with the next of ``tasks`` (one per view not fixed, in order); a
+    "segment" step per view."""
     made = iter(run_views(fn, tasks, lambda: step("segment")))
     masks = [fixed[i] if i in fixed else next(made) for i in range(len(tasks) + len(fixed))]
     for _ in fixed:
