@@ -36,6 +36,7 @@ log = logging.getLogger("orca.masks")
 # 3-6 px short in most views and was never found cut (a rim of 3 % of the radius); no other capture's masks come
 # within 8 px of an outline that does not cut its object.
 RIM_PX = 6
+RIM_MAX_SHARE = 0.1  # but at most this share of the sphere image's radius: in a thumbnail 6 px is most of the sphere
 RIM_COVERED = 0.02  # a mask touches the outline when it covers this share of the outline's pixels
 PROBE_EXTENT = 1.0  # the probe's hull is carved in the unit sphere's cube
 
@@ -58,11 +59,12 @@ def in_sphere_frame(view: View, centre: np.ndarray, radius: float) -> View:
 
 
 def outline_rim(distance: np.ndarray) -> np.ndarray:
-    """``(H, W)`` bool: the pixels of the unit sphere's image within :data:`RIM_PX` of its outline; ``distance``:
-    :func:`sphere_distance`. Where the image cuts the sphere's image off, its edge is not the outline."""
+    """``(H, W)`` bool: the pixels of the unit sphere's image within :data:`RIM_PX` of its outline (at most
+    :data:`RIM_MAX_SHARE` of the image's radius, its deepest pixel's depth); ``distance``: :func:`sphere_distance`.
+    Where the image cuts the sphere's image off, its edge is not the outline."""
     inside = (distance < 1.0).astype(np.uint8)
     depth = cv2.distanceTransform(np.pad(inside, 1, mode="edge"), cv2.DIST_L2, cv2.DIST_MASK_5)[1:-1, 1:-1]
-    return (inside > 0) & (depth <= RIM_PX)
+    return (inside > 0) & (depth <= min(RIM_PX, RIM_MAX_SHARE * float(depth.max(initial=0.0))))
 
 
 def touches_outline(mask: np.ndarray, distance: np.ndarray) -> bool:

@@ -673,13 +673,15 @@ def test_the_sphere_prior_grows_until_it_contains_an_object_larger_than_the_pose
 
 def test_the_sphere_prior_grows_for_masks_that_stop_short_of_the_outline():
     """Masks cut by the sphere whose outline GrabCut keeps a few pixels clear of the certain background beyond it
-    (a textured torus on a poster floor): the ball's clipped silhouettes eroded by 4 px still reach the outline,
-    and the prior grows until the ball is inside. The first sphere's image is about 60 px across here, so a rim
-    of 3 % of its radius (1 px) would not see them."""
-    views = ring_views(12, size=(200, 150)) + ring_views(8, size=(200, 150), elevation_deg=50.0)
+    (a textured torus on a poster floor): the ball's clipped silhouettes eroded by 3 px still reach the outline,
+    and the prior grows until the ball is inside. The first sphere's image is about 85 px across here, so a rim
+    of 3 % of its radius (1.3 px) would not see them."""
+    zoomed = np.diag([2.0, 2.0, 1.0])  # twice the focal length on a 400x300 image: the sphere twice as large
+    views = [replace(v, K=zoomed @ v.K, image=np.zeros((300, 400, 3), np.uint8))
+             for v in ring_views(12, size=(200, 150)) + ring_views(8, size=(200, 150), elevation_deg=50.0)]
     centre, radius = np.array([0.2, 0.0, 0.0]), 1.2
     clipped = clipped_ball_masks(centre, radius, views)
-    short = 4
+    short = 3
 
     def stopping_short(framed, opts, c, r):
         return [cv2.erode(m.astype(np.uint8), disc(short)) > 0 for m in clipped(framed, opts, c, r)]
