@@ -78,15 +78,17 @@ def gmm_log_likelihood(model: np.ndarray, pixels: np.ndarray) -> np.ndarray:
     k = GMM_COMPONENTS
     flat = model.ravel()
     weights, means, covs = flat[:k], flat[k:4 * k].reshape(k, 3), flat[4 * k:13 * k].reshape(k, 3, 3)
-    density = np.zeros(len(pixels))
+    # Summed in log space: a colour far from every component of both models (a clipped highlight against two
+    # narrow models) would underflow both densities to 0 and read as odds 0, neither object nor room.
+    terms = []
     for w, mu, cov in zip(weights, means, covs):
         if w <= 0:
             continue
         cov = cov + GMM_MIN_VARIANCE * np.eye(3)
         d = pixels - mu
         q = np.einsum("ni,ij,nj->n", d, np.linalg.inv(cov), d)
-        density += w * np.exp(-0.5 * q) / np.sqrt((2 * np.pi) ** 3 * np.linalg.det(cov))
-    return np.log(density + np.finfo(np.float64).tiny)
+        terms.append(np.log(w) - 0.5 * (q + 3 * np.log(2 * np.pi) + np.log(np.linalg.det(cov))))
+    return np.logaddexp.reduce(terms, axis=0) if terms else np.full(len(pixels), -np.inf)
 
 
 def first_seeds(sphere: np.ndarray, background: np.ndarray, seed_radius: float,

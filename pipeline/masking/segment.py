@@ -423,7 +423,7 @@ def thin_cut_odds(hull: np.ndarray, mask: np.ndarray, odds: np.ndarray, thin_px:
         return odds
     cut = (hull & ~mask).astype(np.uint8)
     wide = cv2.morphologyEx(cut, cv2.MORPH_OPEN, disc(thin_px)) > 0
-    return np.where(wide, np.float32(np.inf), odds).astype(np.float32)
+    return np.where(wide, np.float32(np.inf), odds)
 
 
 def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixed: dict[int, np.ndarray] | None = None,
