@@ -415,6 +415,23 @@ class MasksConfig(StrictModel):
         "wood) has the object's colours over the capture. 0: at least as common in the room as on the object"
     )
     trim_colour_bins: int = Field(16, ge=2, le=64, description="...colour histograms with this many bins per channel")
+    restore_colour_log_odds: float | None = Field(
+        0.0, description="then the final masks get back the pieces of the hull they left out (wider than a disc of "
+        "restore_piece_px, not certain background) whose ray crosses a voxel that fewer than "
+        "restore_seen_through_votes see past, where their colour is not this much likelier (natural log of the "
+        "odds, trim_colour_bins per channel) in the room around this view's mask than in every view's mask core: "
+        "a view's colours lose a white mug's shadowed side on its dark shadow, while hardly any other view sees "
+        "past it (pipeline.masking.colour.restore_object_colours; docs/masks.md). None: off"
+    )
+    restore_seen_through_votes: float = Field(
+        3.25, gt=0, description="...a piece is restored where its ray crosses a voxel with fewer background votes "
+        "than this (3.25: at most three views'). Higher: more of the hull comes back, the room in gaps few views "
+        "see through as well"
+    )
+    restore_piece_px: int = Field(
+        1, ge=0, description="...only pieces wider than a disc of this radius: the band along the outline is the "
+        "view's colours' to decide (final_reach_px)"
+    )
     outline_reach_px: int = Field(
         2, ge=0, description="last, each pixel on either side of a mask's outline goes to the side that covers most "
         "of it: its colour read as a mix (in linear light) of the sure object's and the sure background's within "

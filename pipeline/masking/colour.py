@@ -10,7 +10,9 @@ odds, from colour histograms of the two).
 
 The same odds trim the final masks where some view sees through the hull (:func:`trim_room_colours`): a gap
 shows what the view shows beside the object, and the object's colours, pooled over the whole capture, are not
-that.
+that. And they decide the converse (:func:`restore_object_colours`): a piece of the hull that no more than a few
+views see past, which a view's colours gave to the room although its colour is no likelier there than on the
+object (a white mug's shadowed side on its dark shadow), goes back to the object.
 """
 
 from __future__ import annotations
@@ -108,25 +110,67 @@ def trim_room_colours(images: Sequence[np.ndarray], masks: Sequence[np.ndarray],
     A mirror shows the room too, over its core as well, and a glossy rim in a band (thin, or in no gap the views
     see through: the caller's ``trimmable``). A view whose ring has fewer than ``min_pixels`` uses the pooled ring;
     unchanged where either pooled sample has fewer."""
-    n = bins**3
     indices = [colour_index(im, bins) for im in images]
-    rooms, obj = [], np.zeros(n, np.int64)
-    for index, mask in zip(indices, masks):
-        core, band = mask_samples(mask, core_px, band_px)
-        obj += np.bincount(index[core], minlength=n)
-        rooms.append(np.bincount(index[band], minlength=n))
-    room = np.sum(rooms, axis=0)
-    if obj.sum() < min_pixels or room.sum() < min_pixels:
+    tables = room_odds_tables(indices, masks, bins, core_px, band_px, min_pixels)
+    if tables is None:
         return list(masks)
-    capture = log_odds_table(room, obj)
+    views, capture = tables
     out = []
-    for index, mask, where, own in zip(indices, masks, trimmable, rooms):
+    for index, mask, where, view in zip(indices, masks, trimmable, views):
         if where is None:
             out.append(mask)
             continue
-        view = log_odds_table(own, obj) if own.sum() >= min_pixels else capture
         region = mask & where
         room_like = (room_pieces(view[index], region, log_odds, open_px)
                      & room_pieces(capture[index], region, capture_log_odds, open_px))
         out.append(mask & ~room_like)
+    return out
+
+
+def room_odds_tables(indices: Sequence[np.ndarray], masks: Sequence[np.ndarray], bins: int, core_px: int,
+                     band_px: tuple[int, int], min_pixels: int,
+                     unsure: Sequence[np.ndarray | None] | None = None
+                     ) -> tuple[list[np.ndarray], np.ndarray] | None:
+    """Per view, the ``(B,)`` :func:`log_odds_table` of the ring ``band_px`` outside its ``(H, W)`` bool mask (less
+    the view's ``unsure`` pixels, where given) against the object's colours pooled over every view (each mask
+    eroded by ``core_px``; :func:`mask_samples`), from the views' ``(H, W)`` colour ``indices``
+    (:func:`colour_index`, ``bins`` per channel); and the capture's table, every view's ring pooled, which a view
+    whose ring has fewer than ``min_pixels`` takes as its own. None when either pooled sample has fewer."""
+    n = bins**3
+    rooms, obj = [], np.zeros(n, np.int64)
+    for k, (index, mask) in enumerate(zip(indices, masks)):
+        core, band = mask_samples(mask, core_px, band_px)
+        if unsure is not None and unsure[k] is not None:
+            band = band & ~unsure[k]
+        obj += np.bincount(index[core], minlength=n)
+        rooms.append(np.bincount(index[band], minlength=n))
+    room = np.sum(rooms, axis=0)
+    if obj.sum() < min_pixels or room.sum() < min_pixels:
+        return None
+    capture = log_odds_table(room, obj)
+    return [log_odds_table(own, obj) if own.sum() >= min_pixels else capture for own in rooms], capture
+
+
+def restore_object_colours(images: Sequence[np.ndarray], masks: Sequence[np.ndarray],
+                           restorable: Sequence[np.ndarray | None], bins: int, log_odds: float, piece_px: int,
+                           blur_px: int, core_px: int, band_px: tuple[int, int], min_pixels: int
+                           ) -> list[np.ndarray]:
+    """The ``(H, W)`` bool ``masks`` of the ``(H, W, 3)`` uint8 ``images`` with the pieces of each view's ``(H, W)``
+    bool ``restorable`` region (None: none) wider than a disc of ``piece_px`` added back where their colour is
+    not ``log_odds`` likelier in the view's room than on the object (:func:`room_odds_tables`, the odds averaged
+    over a disc of ``blur_px``; the room's sample leaves the restorable pixels out, which lie beside the mask and
+    are what is in question): the colours that lost them say nothing either way. The room's colours stay out: a
+    gap the hull kept shows the room behind, and the view's colours were right to take it."""
+    indices = [colour_index(im, bins) for im in images]
+    tables = room_odds_tables(indices, masks, bins, core_px, band_px, min_pixels, restorable)
+    if tables is None:
+        return list(masks)
+    out = []
+    for index, mask, where, view in zip(indices, masks, restorable, tables[0]):
+        if where is None:
+            out.append(mask)
+            continue
+        pieces = cv2.morphologyEx(where.astype(np.uint8), cv2.MORPH_OPEN, disc(piece_px)) > 0 if piece_px else where
+        odds = cv2.blur(view[index], (2 * blur_px + 1, 2 * blur_px + 1)) if blur_px else view[index]
+        out.append(mask | (pieces & (odds < log_odds)))
     return out

@@ -13,7 +13,7 @@ import numpy as np
 from ..config import MasksConfig
 from ..metrics import iou
 from ..object_frame import camera_up
-from .colour import release_room_colours, trim_room_colours
+from .colour import release_room_colours, restore_object_colours, trim_room_colours
 from .grabcut import first_seeds, grabcut, grabcut_odds, hull_seeds
 from .hull import (
     OUTSIDE_VOTES,
@@ -517,6 +517,18 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
         final = trim_room_colours([v.image for v in views], final, trimmable, opts.trim_colour_bins,
                                   opts.trim_colour_log_odds, opts.trim_capture_log_odds, opts.colour_open_px,
                                   opts.trim_core_px, opts.trim_band_px, opts.colour_min_pixels)
+    if opts.restore_colour_log_odds is not None:
+        # The converse: a piece of the hull that hardly any view sees past, which this view's colours gave to the
+        # room although they say nothing either way (a white mug's shadowed side on its dark shadow, a dark torus
+        # against dark posters), is the object the views agree on. A gap few views see through keeps the room's
+        # colours, and stays out.
+        auto = [i for i in range(n) if i not in fixed]
+        firm = dict(zip(auto, run_views(reproject, [(volume, views[i], opts.restore_seen_through_votes, plane)
+                                                    for i in auto], lambda: None)))
+        restorable = [hulls[i] & firm[i] & ~final[i] & ~backgrounds[i] if i in firm else None for i in range(n)]
+        final = restore_object_colours([v.image for v in views], final, restorable, opts.trim_colour_bins,
+                                       opts.restore_colour_log_odds, opts.restore_piece_px, opts.colour_open_px,
+                                       opts.trim_core_px, opts.trim_band_px, opts.colour_min_pixels)
     if opts.outline_reach_px > 0:
         final = [m if i in fixed else snap_outline(views[i].image, m, opts.outline_reach_px, opts.outline_contrast,
                                                    opts.outline_margin, opts.outline_residual, backgrounds[i])

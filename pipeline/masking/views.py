@@ -91,6 +91,9 @@ class SegmentOptions:
     trim_core_px: int = 6
     trim_band_px: tuple[int, int] = (3, 18)
     trim_seen_through_votes: float = 0.75
+    restore_colour_log_odds: float | None = 0.0
+    restore_seen_through_votes: float = 3.25
+    restore_piece_px: int = 1
     band_px: int = 4
     outline_reach_px: int = 2
     outline_contrast: float = 0.1

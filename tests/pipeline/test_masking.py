@@ -17,6 +17,7 @@ from pipeline.masking.colour import (
     log_odds_table,
     mask_samples,
     release_room_colours,
+    restore_object_colours,
     trim_room_colours,
 )
 from pipeline.masking.grabcut import gmm_log_likelihood, grabcut, grabcut_odds, hull_seeds
@@ -1118,6 +1119,42 @@ def test_a_gap_goes_where_it_shows_the_room_beside_the_object_in_its_own_view_an
     # without the capture's check the knob goes with the wedge
     unchecked = trim_room_colours(images, masks, trimmable, *args, -np.inf, 1, 6, (3, 18), 50)
     assert (unchecked[15] & knob).sum() < 0.5 * knob.sum()
+
+
+def test_a_lost_piece_comes_back_unless_it_shows_the_room_and_a_thin_band_stays_the_views():
+    """Eight views of a grey mug (a disc) on a brown floor whose masks lost its shadowed side (a dark grey crescent,
+    as dark as the floor's shadow beside it) in views 0-3, and in view 4 also hold a wedge of floor beside the mug
+    that the view rightly cut. All three are restorable (the hull holds them, hardly any view sees past them): the
+    crescent, whose colour the object's pooled core shows as often as the room around the masks, comes back; the
+    wedge, the room's own colour, stays out; a 1 px band along the outline is the views' own to decide. A view
+    with nothing restorable is left as it is."""
+    rng = np.random.default_rng(4)
+    yy, xx = np.mgrid[:120, :160]
+    disc_ = (yy - 60) ** 2 + (xx - 80) ** 2 < 30**2
+    crescent = disc_ & (xx > 96)
+    wedge = (xx >= 40) & (xx < 52) & (yy >= 40) & (yy < 80) & ~disc_
+    band = disc_ & ~(cv2.erode(disc_.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0) & (xx < 80)
+    floor, shadow, mug, dark = (120, 80, 50), (60, 55, 50), (200, 200, 195), (70, 68, 66)
+    images, masks, restorable = [], [], []
+    for v in range(8):
+        colours = np.where((xx > 110)[..., None], shadow, floor)
+        colours = np.where(disc_[..., None], mug, colours)
+        colours = np.where(crescent[..., None], dark, colours)  # every view's mug has its dark side
+        images.append(np.clip(rng.normal(colours, 6), 0, 255).astype(np.uint8))
+        lost = crescent if v < 4 else np.zeros_like(disc_)
+        masks.append(disc_ & ~lost & ~(band if v == 5 else False))
+        restorable.append(lost | (wedge if v == 4 else False) | (band if v == 5 else False))
+    restorable[7] = None
+    out = restore_object_colours(images, masks, restorable, 16, 0.0, 1, 2, 6, (3, 18), 50)
+    for v in range(4):
+        assert (out[v] & crescent).sum() > 0.85 * crescent.sum(), v  # less its tips, thinner than the disc
+        assert not (out[v] & ~disc_).any(), v
+    assert not (out[4] & wedge).any()
+    assert (out[5] == masks[5]).all()  # the band is thinner than the pieces' disc
+    assert (out[7] == masks[7]).all() and (out[6] == masks[6]).all()
+    # restore nothing whose colour is no likelier on the object than in the room: a threshold below every odds
+    assert all((o == m).all() for o, m in zip(restore_object_colours(images, masks, restorable, 16, -20.0, 1, 2, 6,
+                                                                     (3, 18), 50), masks))
 
 
 def test_a_plane_keeps_its_points_in_the_spheres_frame_and_back():
