@@ -519,9 +519,8 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
                                   opts.trim_core_px, opts.trim_band_px, opts.colour_min_pixels)
     if opts.restore_colour_log_odds is not None:
         # The converse: a piece of the hull that hardly any view sees past, which this view's colours gave to the
-        # room although they say nothing either way (a white mug's shadowed side on its dark shadow, a dark torus
-        # against dark posters), is the object the views agree on. A gap few views see through keeps the room's
-        # colours, and stays out.
+        # room although they say nothing either way (a white mug's shadowed side on its dark shadow), is the object
+        # the views agree on. A gap few views see through keeps the room's colours, and stays out.
         auto = [i for i in range(n) if i not in fixed]
         firm = dict(zip(auto, run_views(reproject, [(volume, views[i], opts.restore_seen_through_votes, plane)
                                                     for i in auto], lambda: None)))
