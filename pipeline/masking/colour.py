@@ -158,9 +158,9 @@ def restore_object_colours(images: Sequence[np.ndarray], masks: Sequence[np.ndar
     """The ``(H, W)`` bool ``masks`` of the ``(H, W, 3)`` uint8 ``images`` with the pieces of each view's ``(H, W)``
     bool ``restorable`` region (None: none) wider than a disc of ``piece_px`` added back where their colour is
     not ``log_odds`` likelier in the view's room than on the object (:func:`room_odds_tables`, the odds averaged
-    over a disc of ``blur_px``; the room's sample leaves the restorable pixels out, which lie beside the mask and
-    are what is in question): the colours that lost them say nothing either way. The room's colours stay out: a
-    gap the hull kept shows the room behind, and the view's colours were right to take it."""
+    over a square of ``2 blur_px + 1`` pixels; the room's sample leaves the restorable pixels out, which lie
+    beside the mask and are what is in question): the colours that lost them say nothing either way. The room's
+    colours stay out: a gap the hull kept shows the room behind, and the view's colours were right to take it."""
     indices = [colour_index(im, bins) for im in images]
     tables = room_odds_tables(indices, masks, bins, core_px, band_px, min_pixels, restorable)
     if tables is None:
