@@ -426,6 +426,16 @@ def thin_cut_odds(hull: np.ndarray, mask: np.ndarray, odds: np.ndarray, thin_px:
     return np.where(wide, np.float32(np.inf), odds)
 
 
+def firm_hull(volume: np.ndarray, views: Sequence[View], fixed: dict[int, np.ndarray], max_votes: float,
+              plane: Plane | None, run_views: MapViews) -> list[np.ndarray | None]:
+    """Per view, ``(H, W)`` bool: the pixels whose ray crosses a voxel of ``volume`` with fewer than ``max_votes``
+    background votes (:func:`.hull.reproject`), where hardly any view sees past the hull; None for the ``fixed``
+    views (the user's masks are kept as they are)."""
+    auto = [i for i in range(len(views)) if i not in fixed]
+    found = dict(zip(auto, run_views(reproject, [(volume, views[i], max_votes, plane) for i in auto], lambda: None)))
+    return [found.get(i) for i in range(len(views))]
+
+
 def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixed: dict[int, np.ndarray] | None = None,
            step: Callable[[str], None] = lambda label: None, run_views: MapViews = serial) -> Segmentation:
     """Rounds of carving and GrabCut from the ``evidence``, then the final masks (see the module doc); each view's
@@ -510,10 +520,8 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
         # parts that too few views see through to carve. A glossy rim showing the room is solid object to every
         # view that sees it inside its outline (unrestricted, a dark glossy blob in a poster room lost its rims:
         # worst view 0.962 -> 0.874).
-        auto = [i for i in range(n) if i not in fixed]
-        firm = dict(zip(auto, run_views(reproject, [(volume, views[i], opts.trim_seen_through_votes, plane)
-                                                    for i in auto], lambda: None)))
-        trimmable = [hulls[i] & ~firm[i] if i in firm else None for i in range(n)]
+        firm = firm_hull(volume, views, fixed, opts.trim_seen_through_votes, plane, run_views)
+        trimmable = [None if f is None else h & ~f for h, f in zip(hulls, firm)]
         final = trim_room_colours([v.image for v in views], final, trimmable, opts.trim_colour_bins,
                                   opts.trim_colour_log_odds, opts.trim_capture_log_odds, opts.colour_open_px,
                                   opts.trim_core_px, opts.trim_band_px, opts.colour_min_pixels)
@@ -521,10 +529,8 @@ def refine(views: Sequence[View], opts: SegmentOptions, evidence: Evidence, fixe
         # The converse: a piece of the hull that hardly any view sees past, which this view's colours gave to the
         # room although they say nothing either way (a white mug's shadowed side on its dark shadow), is the object
         # the views agree on. A gap few views see through keeps the room's colours, and stays out.
-        auto = [i for i in range(n) if i not in fixed]
-        firm = dict(zip(auto, run_views(reproject, [(volume, views[i], opts.restore_seen_through_votes, plane)
-                                                    for i in auto], lambda: None)))
-        restorable = [hulls[i] & firm[i] & ~final[i] & ~backgrounds[i] if i in firm else None for i in range(n)]
+        firm = firm_hull(volume, views, fixed, opts.restore_seen_through_votes, plane, run_views)
+        restorable = [None if f is None else h & f & ~m & ~b for h, f, m, b in zip(hulls, firm, final, backgrounds)]
         final = restore_object_colours([v.image for v in views], final, restorable, opts.trim_colour_bins,
                                        opts.restore_colour_log_odds, opts.restore_piece_px, opts.colour_open_px,
                                        opts.trim_core_px, opts.trim_band_px, opts.colour_min_pixels)
